@@ -1,0 +1,505 @@
+//! Binned SAH builder producing wide nodes directly.
+//!
+//! The builder sees only boxes and centroids (madmann91/bvh's rule), never triangles. It follows
+//! Embree's `BVHBuilderBinnedSAH` (`kernels/builders/bvh_builder_sah.h`): per node, bin centroids
+//! into [`BuildConfig::bins`] bins on all three axes and sweep for the split of least SAH cost
+//! (Wald, "On fast Construction of SAH-based Bounding Volume Hierarchies", RT 2007), counting
+//! primitives in whole leaf blocks; then fill a wide node by repeatedly splitting the child with the
+//! largest surface area until it has [`WIDTH`] children; then recurse, in parallel with rayon
+//! above [`BuildConfig::parallel_threshold`] primitives.
+
+use glam::Vec3A;
+use rayon::prelude::*;
+
+use super::node::{MAX_LEAF_BLOCKS, WIDTH};
+use crate::geometry::triangle::BLOCK;
+
+/// Builder settings. Costs are per node visit and per block test, as in Embree's statistics.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BuildConfig {
+    /// Centroid bins per axis.
+    pub bins: usize,
+    /// Sets of at most this many primitives are never split.
+    pub min_leaf: usize,
+    /// Sets of more primitives are always split (at most [`MAX_LEAF_BLOCKS`] blocks of 4).
+    pub max_leaf: usize,
+    /// Cost of visiting a node, relative to one block test.
+    pub traversal_cost: f32,
+    /// Cost of testing one block of triangles.
+    pub intersection_cost: f32,
+    /// Subtrees with more primitives are built in parallel.
+    pub parallel_threshold: usize,
+}
+
+impl Default for BuildConfig {
+    /// Embree MEDIUM's choices for triangle BVHs: 32 bins, leaves of up to a few blocks of 4.
+    fn default() -> Self {
+        Self {
+            bins: 32,
+            min_leaf: BLOCK,
+            max_leaf: 8 * BLOCK,
+            traversal_cost: 1.0,
+            intersection_cost: 1.0,
+            parallel_threshold: 4096,
+        }
+    }
+}
+
+impl BuildConfig {
+    /// Fewer bins: a faster build of a slightly worse tree.
+    pub fn fast() -> Self {
+        Self {
+            bins: 16,
+            ..Self::default()
+        }
+    }
+
+    fn clamped(&self) -> Self {
+        let max_leaf = self.max_leaf.clamp(1, MAX_LEAF_BLOCKS * BLOCK);
+        Self {
+            bins: self.bins.clamp(2, 256),
+            min_leaf: self.min_leaf.clamp(1, max_leaf),
+            max_leaf,
+            traversal_cost: self.traversal_cost.max(0.0),
+            intersection_cost: self.intersection_cost.max(1e-6),
+            parallel_threshold: self.parallel_threshold.max(64),
+        }
+    }
+}
+
+/// Past this many wide levels, sets are split at the object median so that depth (and the
+/// traversal stack) stays bounded whatever the input.
+pub(crate) const MEDIAN_DEPTH: usize = 40;
+
+/// An axis-aligned box.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Aabb {
+    pub lo: Vec3A,
+    pub hi: Vec3A,
+}
+
+impl Aabb {
+    pub const EMPTY: Self = Self {
+        lo: Vec3A::INFINITY,
+        hi: Vec3A::NEG_INFINITY,
+    };
+
+    #[inline]
+    pub fn grow(&mut self, o: &Aabb) {
+        self.lo = self.lo.min(o.lo);
+        self.hi = self.hi.max(o.hi);
+    }
+
+    #[inline]
+    pub fn grow_point(&mut self, p: Vec3A) {
+        self.lo = self.lo.min(p);
+        self.hi = self.hi.max(p);
+    }
+
+    /// Half the surface area; 0 for an empty box.
+    #[inline]
+    pub fn half_area(&self) -> f32 {
+        let d = (self.hi - self.lo).max(Vec3A::ZERO);
+        d.x * d.y + d.y * d.z + d.z * d.x
+    }
+}
+
+/// A primitive as the builder sees it: its box and its index.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct PrimRef {
+    pub bounds: Aabb,
+    pub id: u32,
+}
+
+impl PrimRef {
+    /// Twice the centroid (saves a multiply; only ratios of it are used).
+    #[inline]
+    fn center2(&self) -> Vec3A {
+        self.bounds.lo + self.bounds.hi
+    }
+}
+
+/// The builder's output before flattening.
+pub(crate) enum BuildNode {
+    /// Primitives `start..start + count` of the reordered reference array.
+    Leaf {
+        start: usize,
+        count: usize,
+    },
+    Inner {
+        children: Vec<(Aabb, BuildNode)>,
+    },
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Split {
+    axis: usize,
+    /// Primitives in bins `< pos` go left.
+    pos: usize,
+    /// `A_left · blocks_left + A_right · blocks_right` (half areas).
+    cost: f32,
+    scale: f32,
+    offset: f32,
+}
+
+/// A set of primitives under construction: a range of the reference array with its bounds.
+#[derive(Clone, Copy, Debug)]
+struct Set {
+    start: usize,
+    count: usize,
+    bounds: Aabb,
+    centroids: Aabb,
+}
+
+#[inline]
+fn blocks(n: usize) -> f32 {
+    n.div_ceil(BLOCK) as f32
+}
+
+#[derive(Clone)]
+struct Bins {
+    boxes: Vec<[Aabb; 3]>,
+    counts: Vec<[u32; 3]>,
+}
+
+impl Bins {
+    fn new(n: usize) -> Self {
+        Self {
+            boxes: vec![[Aabb::EMPTY; 3]; n],
+            counts: vec![[0; 3]; n],
+        }
+    }
+
+    fn merge(mut self, o: Bins) -> Bins {
+        for (a, b) in self.boxes.iter_mut().zip(&o.boxes) {
+            for k in 0..3 {
+                a[k].grow(&b[k]);
+            }
+        }
+        for (a, b) in self.counts.iter_mut().zip(&o.counts) {
+            for k in 0..3 {
+                a[k] += b[k];
+            }
+        }
+        self
+    }
+}
+
+#[inline]
+fn bin_of(c: f32, offset: f32, scale: f32, nbins: usize) -> usize {
+    // Truncation of a finite non-negative value; NaN and negatives become 0.
+    (((c - offset) * scale) as usize).min(nbins - 1)
+}
+
+fn bin_into(bins: &mut Bins, prims: &[PrimRef], offset: Vec3A, scale: Vec3A) {
+    let n = bins.counts.len();
+    for p in prims {
+        let c = p.center2();
+        for a in 0..3 {
+            let b = bin_of(c[a], offset[a], scale[a], n);
+            bins.boxes[b][a].grow(&p.bounds);
+            bins.counts[b][a] += 1;
+        }
+    }
+}
+
+/// The best binned SAH split of `prims` (whose doubled centroids lie in `cb`), if any axis has
+/// extent.
+fn find_split(prims: &[PrimRef], cb: &Aabb, cfg: &BuildConfig) -> Option<Split> {
+    let nb = cfg.bins;
+    let ext = cb.hi - cb.lo;
+    // Slightly less than nb / extent so that the largest centroid lands in the last bin.
+    let scale = Vec3A::select(
+        ext.cmpgt(Vec3A::ZERO),
+        Vec3A::splat(nb as f32 * 0.99999) / ext,
+        Vec3A::ZERO,
+    );
+    let bins = if prims.len() >= cfg.parallel_threshold * 4 {
+        prims
+            .par_chunks(cfg.parallel_threshold)
+            .map(|c| {
+                let mut b = Bins::new(nb);
+                bin_into(&mut b, c, cb.lo, scale);
+                b
+            })
+            .reduce(|| Bins::new(nb), Bins::merge)
+    } else {
+        let mut b = Bins::new(nb);
+        bin_into(&mut b, prims, cb.lo, scale);
+        b
+    };
+    let mut best: Option<Split> = None;
+    let mut right_area = vec![0.0f32; nb];
+    let mut right_count = vec![0usize; nb];
+    for axis in 0..3 {
+        if scale[axis] == 0.0 {
+            continue;
+        }
+        // Sweep from the right: area and count of bins >= i.
+        let mut acc = Aabb::EMPTY;
+        let mut cnt = 0usize;
+        for i in (1..nb).rev() {
+            acc.grow(&bins.boxes[i][axis]);
+            cnt += bins.counts[i][axis] as usize;
+            right_area[i] = acc.half_area();
+            right_count[i] = cnt;
+        }
+        // Sweep from the left, evaluating the split before bin i.
+        let mut acc = Aabb::EMPTY;
+        let mut cnt = 0usize;
+        for i in 1..nb {
+            acc.grow(&bins.boxes[i - 1][axis]);
+            cnt += bins.counts[i - 1][axis] as usize;
+            if cnt == 0 || right_count[i] == 0 {
+                continue;
+            }
+            let cost = acc.half_area() * blocks(cnt) + right_area[i] * blocks(right_count[i]);
+            if best.is_none_or(|b| cost < b.cost) {
+                best = Some(Split {
+                    axis,
+                    pos: i,
+                    cost,
+                    scale: scale[axis],
+                    offset: cb.lo[axis],
+                });
+            }
+        }
+    }
+    best
+}
+
+/// Reorders `prims` so that the left side of `split` comes first; returns the left count.
+fn partition(prims: &mut [PrimRef], split: &Split, nbins: usize) -> usize {
+    let goes_left =
+        |p: &PrimRef| bin_of(p.center2()[split.axis], split.offset, split.scale, nbins) < split.pos;
+    let (mut i, mut j) = (0usize, prims.len());
+    while i < j {
+        if goes_left(&prims[i]) {
+            i += 1;
+        } else {
+            j -= 1;
+            prims.swap(i, j);
+        }
+    }
+    i
+}
+
+fn set_of(prims: &[PrimRef], start: usize) -> Set {
+    let mut bounds = Aabb::EMPTY;
+    let mut centroids = Aabb::EMPTY;
+    for p in prims {
+        bounds.grow(&p.bounds);
+        centroids.grow_point(p.center2());
+    }
+    Set {
+        start,
+        count: prims.len(),
+        bounds,
+        centroids,
+    }
+}
+
+/// Splits `set` (whose primitives are `prims`, indexed from `set.start`) in two: by SAH where
+/// possible, else at the object median.
+fn split_set(
+    set: &Set,
+    prims: &mut [PrimRef],
+    split: Option<Split>,
+    cfg: &BuildConfig,
+) -> (Set, Set) {
+    let local = &mut prims[set.start..set.start + set.count];
+    let mid = match split {
+        Some(s) => partition(local, &s, cfg.bins),
+        None => 0,
+    };
+    let mid = if mid == 0 || mid == local.len() {
+        // No usable split (all centroids equal, or forced): halve in the current order.
+        local.len() / 2
+    } else {
+        mid
+    };
+    let (l, r) = local.split_at(mid);
+    (set_of(l, set.start), set_of(r, set.start + mid))
+}
+
+/// Builds the tree over `prims` (reordering them) and returns it with its root bounds.
+pub(crate) fn build(prims: &mut [PrimRef], cfg: &BuildConfig) -> Option<(Aabb, BuildNode)> {
+    if prims.is_empty() {
+        return None;
+    }
+    let cfg = cfg.clamped();
+    let root = set_of(prims, 0);
+    let node = recurse(root, prims, &cfg, 0);
+    Some((root.bounds, node))
+}
+
+/// Builds the subtree of `set`. `prims` is the slice that `set` indexes into, starting at index
+/// `base` of the whole reference array; ranges stored in the result are absolute.
+fn recurse(set: Set, prims: &mut [PrimRef], cfg: &BuildConfig, depth: usize) -> BuildNode {
+    recurse_at(set, prims, 0, cfg, depth)
+}
+
+fn recurse_at(
+    set: Set,
+    prims: &mut [PrimRef],
+    base: usize,
+    cfg: &BuildConfig,
+    depth: usize,
+) -> BuildNode {
+    let local = Set {
+        start: set.start - base,
+        ..set
+    };
+    let make_leaf = || BuildNode::Leaf {
+        start: set.start,
+        count: set.count,
+    };
+    if set.count <= cfg.min_leaf {
+        return make_leaf();
+    }
+    let median = depth >= MEDIAN_DEPTH;
+    let own_split = if median {
+        None
+    } else {
+        find_split(
+            &prims[local.start..local.start + local.count],
+            &set.centroids,
+            cfg,
+        )
+    };
+    if set.count <= cfg.max_leaf {
+        let area = set.bounds.half_area();
+        let leaf_cost = cfg.intersection_cost * blocks(set.count) * area;
+        let split_cost = match own_split {
+            Some(s) => cfg.traversal_cost * area + cfg.intersection_cost * s.cost,
+            None => f32::INFINITY,
+        };
+        if leaf_cost <= split_cost {
+            return make_leaf();
+        }
+    }
+
+    // Fill a wide node: split the child of largest area until there are WIDTH children.
+    let mut children: Vec<(Set, Option<Option<Split>>)> = vec![(local, Some(own_split))];
+    while children.len() < WIDTH {
+        let pick = children
+            .iter()
+            .enumerate()
+            .filter(|(_, (s, _))| s.count > cfg.min_leaf)
+            .max_by(|a, b| {
+                a.1.0
+                    .bounds
+                    .half_area()
+                    .total_cmp(&b.1.0.bounds.half_area())
+            })
+            .map(|(i, _)| i);
+        let Some(i) = pick else { break };
+        let (s, known) = children.swap_remove(i);
+        let split = match known {
+            Some(k) => k,
+            None if median => None,
+            None => find_split(&prims[s.start..s.start + s.count], &s.centroids, cfg),
+        };
+        let (l, r) = split_set(&s, prims, split, cfg);
+        children.push((l, None));
+        children.push((r, None));
+    }
+    // Children in reference order, so that the slice can be cut into disjoint pieces.
+    let mut sets: Vec<Set> = children.into_iter().map(|(s, _)| s).collect();
+    sets.sort_by_key(|s| s.start);
+    let mut pieces = Vec::with_capacity(sets.len());
+    let mut rest = prims;
+    let mut offset = 0usize;
+    for s in &sets {
+        let (_, tail) = rest.split_at_mut(s.start - offset);
+        let (piece, tail) = tail.split_at_mut(s.count);
+        pieces.push((
+            Set {
+                start: s.start + base,
+                ..*s
+            },
+            piece,
+            s.start + base,
+        ));
+        rest = tail;
+        offset = s.start + s.count;
+    }
+    let build_child = |(s, piece, b): (Set, &mut [PrimRef], usize)| {
+        (s.bounds, recurse_at(s, piece, b, cfg, depth + 1))
+    };
+    let built: Vec<(Aabb, BuildNode)> = if set.count >= cfg.parallel_threshold {
+        pieces.into_par_iter().map(build_child).collect()
+    } else {
+        pieces.into_iter().map(build_child).collect()
+    };
+    BuildNode::Inner { children: built }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn prims_on_line(n: usize) -> Vec<PrimRef> {
+        (0..n)
+            .map(|i| {
+                let x = i as f32;
+                PrimRef {
+                    bounds: Aabb {
+                        lo: Vec3A::new(x, 0.0, 0.0),
+                        hi: Vec3A::new(x + 0.5, 1.0, 1.0),
+                    },
+                    id: i as u32,
+                }
+            })
+            .collect()
+    }
+
+    fn check(node: &BuildNode, prims: &[PrimRef], seen: &mut Vec<u32>, bounds: &Aabb) {
+        match node {
+            BuildNode::Leaf { start, count } => {
+                assert!(*count >= 1 && *count <= MAX_LEAF_BLOCKS * BLOCK);
+                for p in &prims[*start..start + count] {
+                    assert!(
+                        bounds.lo.cmple(p.bounds.lo).all() && p.bounds.hi.cmple(bounds.hi).all()
+                    );
+                    seen.push(p.id);
+                }
+            }
+            BuildNode::Inner { children } => {
+                assert!(children.len() >= 2 && children.len() <= WIDTH);
+                for (b, c) in children {
+                    check(c, prims, seen, b);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn every_primitive_in_exactly_one_leaf_inside_its_bounds() {
+        for n in [1, 3, 5, 100, 10_000, 50_000] {
+            let mut prims = prims_on_line(n);
+            let (b, root) = build(&mut prims, &BuildConfig::default()).unwrap();
+            let mut seen = Vec::new();
+            check(&root, &prims, &mut seen, &b);
+            seen.sort_unstable();
+            assert_eq!(seen, (0..n as u32).collect::<Vec<_>>());
+        }
+    }
+
+    #[test]
+    fn identical_centroids_still_split() {
+        let mut prims: Vec<PrimRef> = (0..1000)
+            .map(|i| PrimRef {
+                bounds: Aabb {
+                    lo: Vec3A::ZERO,
+                    hi: Vec3A::ONE,
+                },
+                id: i,
+            })
+            .collect();
+        let (b, root) = build(&mut prims, &BuildConfig::default()).unwrap();
+        let mut seen = Vec::new();
+        check(&root, &prims, &mut seen, &b);
+        assert_eq!(seen.len(), 1000);
+    }
+}

@@ -1,0 +1,225 @@
+//! The bounding volume hierarchy: built from boxes and centroids ([`build`]), flattened into wide
+//! nodes ([`node`]) whose leaves reference SoA triangle blocks, traversed by single rays, packets and
+//! streams ([`traverse`]).
+
+pub mod build;
+pub(crate) mod node;
+pub(crate) mod traverse;
+
+use std::time::Instant;
+
+use glam::{Vec3, Vec3A};
+use rayon::prelude::*;
+
+pub use build::BuildConfig;
+use build::{Aabb, BuildNode, PrimRef};
+use node::{EMPTY, MAX_BLOCK_INDEX, Node, leaf_ref};
+
+use crate::error::{Error, Result};
+use crate::geometry::TriangleMesh;
+use crate::geometry::triangle::{BLOCK, TriBlock};
+
+/// Figures the builder reports.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct BuildStats {
+    /// Wall time of the build, from meshes to the flat node and block arrays.
+    pub build_ms: f64,
+    /// Triangles in the BVH (the hittable ones).
+    pub triangles: usize,
+    /// Triangles left out: NaN/infinite corners or zero area. They can never be hit.
+    pub skipped_triangles: usize,
+    pub inner_nodes: usize,
+    pub leaves: usize,
+    pub blocks: usize,
+    /// SAH cost computed as Embree's `BVHNStatistics` does: every inner node costs its half area,
+    /// every leaf block its leaf's half area, all relative to the root's half area.
+    pub sah: f64,
+    /// Bytes of nodes plus triangle blocks.
+    pub bytes: usize,
+    pub bytes_per_triangle: f64,
+    /// Wide levels from the root to the deepest leaf.
+    pub depth: usize,
+}
+
+/// A built BVH over triangle meshes.
+#[derive(Clone, Debug)]
+pub(crate) struct Bvh {
+    pub nodes: Vec<Node>,
+    pub blocks: Vec<TriBlock>,
+    pub root: u32,
+    pub bounds: Option<(Vec3, Vec3)>,
+    pub stats: BuildStats,
+}
+
+impl Bvh {
+    /// Builds over every hittable triangle of `meshes` on the current rayon pool.
+    pub fn build(meshes: &[TriangleMesh], cfg: &BuildConfig) -> Result<Bvh> {
+        let start = Instant::now();
+        if meshes.len() >= u32::MAX as usize {
+            return Err(Error::TooManyGeometries(meshes.len()));
+        }
+        // Primitive references: (geometry, triangle) pairs packed into one global id.
+        let offsets: Vec<usize> = meshes
+            .iter()
+            .scan(0usize, |acc, m| {
+                let o = *acc;
+                *acc += m.triangle_count();
+                Some(o)
+            })
+            .collect();
+        let total: usize = meshes.iter().map(|m| m.triangle_count()).sum();
+        if total >= u32::MAX as usize {
+            return Err(Error::TooManyTriangles(total));
+        }
+        let mut prims: Vec<PrimRef> = meshes
+            .par_iter()
+            .zip(offsets.par_iter())
+            .flat_map_iter(|(m, &off)| {
+                (0..m.triangle_count())
+                    .filter(|&i| m.is_hittable(i))
+                    .map(move |i| {
+                        let [a, b, c] = m.triangle(i);
+                        let (a, b, c) = (Vec3A::from(a), Vec3A::from(b), Vec3A::from(c));
+                        PrimRef {
+                            bounds: Aabb {
+                                lo: a.min(b).min(c),
+                                hi: a.max(b).max(c),
+                            },
+                            id: (off + i) as u32,
+                        }
+                    })
+            })
+            .collect();
+        let skipped = total - prims.len();
+        if prims.len().div_ceil(BLOCK) > MAX_BLOCK_INDEX {
+            return Err(Error::TooManyTriangles(total));
+        }
+        let tree = build::build(&mut prims, cfg);
+
+        // Flatten depth-first into one node array and one block array.
+        let mut flat = Flattener {
+            nodes: Vec::new(),
+            blocks: Vec::new(),
+            prims: &prims,
+            meshes,
+            offsets: &offsets,
+        };
+        let (root, bounds) = match &tree {
+            None => (EMPTY, None),
+            Some((b, node)) => (flat.emit(node), Some((Vec3::from(b.lo), Vec3::from(b.hi)))),
+        };
+        let Flattener { nodes, blocks, .. } = flat;
+        let mut bvh = Bvh {
+            nodes,
+            blocks,
+            root,
+            bounds,
+            stats: BuildStats::default(),
+        };
+        let build_ms = start.elapsed().as_secs_f64() * 1e3;
+        bvh.stats = bvh.compute_stats(tree.as_ref().map(|t| &t.1), prims.len(), skipped, build_ms);
+        Ok(bvh)
+    }
+
+    fn compute_stats(
+        &self,
+        tree: Option<&BuildNode>,
+        triangles: usize,
+        skipped: usize,
+        build_ms: f64,
+    ) -> BuildStats {
+        let bytes =
+            self.nodes.len() * size_of::<Node>() + self.blocks.len() * size_of::<TriBlock>();
+        let mut s = BuildStats {
+            build_ms,
+            triangles,
+            skipped_triangles: skipped,
+            inner_nodes: self.nodes.len(),
+            blocks: self.blocks.len(),
+            bytes,
+            bytes_per_triangle: if triangles > 0 {
+                bytes as f64 / triangles as f64
+            } else {
+                0.0
+            },
+            ..Default::default()
+        };
+        if let (Some(tree), Some((lo, hi))) = (tree, self.bounds) {
+            let root_area = Aabb {
+                lo: lo.into(),
+                hi: hi.into(),
+            }
+            .half_area() as f64;
+            let root_area = if root_area > 0.0 { root_area } else { 1.0 };
+            let mut sah = 0.0f64;
+            let mut leaves = 0usize;
+            let mut depth = 0usize;
+            let mut stack = vec![(
+                tree,
+                Aabb {
+                    lo: lo.into(),
+                    hi: hi.into(),
+                },
+                0usize,
+            )];
+            while let Some((n, b, d)) = stack.pop() {
+                depth = depth.max(d);
+                match n {
+                    BuildNode::Leaf { count, .. } => {
+                        leaves += 1;
+                        sah += b.half_area() as f64 * count.div_ceil(BLOCK) as f64;
+                    }
+                    BuildNode::Inner { children } => {
+                        sah += b.half_area() as f64;
+                        stack.extend(children.iter().map(|(cb, c)| (c, *cb, d + 1)));
+                    }
+                }
+            }
+            s.sah = sah / root_area;
+            s.leaves = leaves;
+            s.depth = depth;
+        }
+        s
+    }
+}
+
+struct Flattener<'a> {
+    nodes: Vec<Node>,
+    blocks: Vec<TriBlock>,
+    prims: &'a [PrimRef],
+    meshes: &'a [TriangleMesh],
+    offsets: &'a [usize],
+}
+
+impl Flattener<'_> {
+    /// Appends `node` and returns the child reference naming it.
+    fn emit(&mut self, node: &BuildNode) -> u32 {
+        match node {
+            BuildNode::Leaf { start, count } => {
+                let first = self.blocks.len();
+                for chunk in self.prims[*start..start + count].chunks(BLOCK) {
+                    let tris: Vec<(u32, u32, [Vec3; 3])> = chunk
+                        .iter()
+                        .map(|p| {
+                            let id = p.id as usize;
+                            let g = self.offsets.partition_point(|&o| o <= id) - 1;
+                            let local = id - self.offsets[g];
+                            (g as u32, local as u32, self.meshes[g].triangle(local))
+                        })
+                        .collect();
+                    self.blocks.push(TriBlock::new(&tris));
+                }
+                leaf_ref(first, self.blocks.len() - first)
+            }
+            BuildNode::Inner { children } => {
+                let index = self.nodes.len();
+                self.nodes.push(Node::default());
+                for (i, (b, child)) in children.iter().enumerate() {
+                    let r = self.emit(child);
+                    self.nodes[index].set(i, r, b.lo.into(), b.hi.into());
+                }
+                index as u32
+            }
+        }
+    }
+}

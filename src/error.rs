@@ -1,0 +1,38 @@
+//! Typed errors of the library. Queries never fail: bad rays get a defined answer (a miss).
+
+use std::path::PathBuf;
+
+/// What can go wrong when loading meshes or building a scene.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    #[error("cannot read OBJ file {path}: {source}")]
+    Obj {
+        path: PathBuf,
+        #[source]
+        source: tobj::LoadError,
+    },
+    #[error("cannot read {path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("position buffer of length {len} is not a whole number of xyz triples")]
+    RaggedPositions { len: usize },
+    #[error("index buffer of length {len} is not a whole number of triangles")]
+    RaggedIndices { len: usize },
+    #[error(
+        "triangle {triangle} refers to vertex {index}, but the mesh has {vertex_count} vertices"
+    )]
+    IndexOutOfRange {
+        triangle: usize,
+        index: u32,
+        vertex_count: usize,
+    },
+    #[error("mesh has {0} triangles; at most 2^32 - 1 are supported")]
+    TooManyTriangles(usize),
+    #[error("scene has {0} geometries; at most 2^32 - 1 are supported")]
+    TooManyGeometries(usize),
+}
+
+pub type Result<T> = std::result::Result<T, Error>;

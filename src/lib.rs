@@ -1,0 +1,44 @@
+//! # strahl
+//!
+//! A data-oriented packet/SIMD CPU ray tracer. Triangle meshes are built into a wide BVH
+//! (binned SAH, 8 children per node, SoA child bounds, leaves of 4-triangle SoA blocks) and
+//! queried by single rays, 16-ray packets and streams, for the closest hit or any hit.
+//!
+//! ```
+//! use strahl::{BuildConfig, Ray, Scene, TriangleMesh};
+//! use glam::Vec3;
+//!
+//! // One triangle in the plane z = 0.
+//! let mesh = TriangleMesh::from_slices("tri", &[0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0], &[0, 1, 2])?;
+//! let scene = Scene::build(vec![mesh], &BuildConfig::default())?;
+//!
+//! let ray = Ray::new(Vec3::new(0.25, 0.25, 1.0), Vec3::new(0.0, 0.0, -1.0));
+//! let hit = scene.intersect(&ray).expect("the ray points at the triangle");
+//! assert_eq!((hit.geom_id, hit.prim_id), (0, 0));
+//! assert!((hit.t - 1.0).abs() < 1e-6);
+//! assert!(scene.occluded(&ray));
+//!
+//! // Bad rays get a defined answer, not a panic.
+//! assert!(scene.intersect(&Ray::new(Vec3::ZERO, Vec3::ZERO)).is_none());
+//! # Ok::<(), strahl::Error>(())
+//! ```
+//!
+//! See `ARCHITECTURE.md` for the data flow and where each part lives.
+#![deny(unsafe_code)]
+
+pub mod bvh;
+pub mod camera;
+pub mod error;
+pub mod geometry;
+pub mod procedural;
+pub mod ray;
+pub mod raygen;
+pub mod scene;
+pub mod simd;
+
+pub use bvh::{BuildConfig, BuildStats};
+pub use camera::Camera;
+pub use error::{Error, Result};
+pub use geometry::{TriangleMesh, load_obj};
+pub use ray::{Hit, HitPacket, HitStream, INVALID_ID, PACKET_WIDTH, Ray, RayPacket, RayStream};
+pub use scene::{Coherence, STREAM_CHUNK, Scene};

@@ -1,0 +1,152 @@
+//! Scenes strahl makes itself: tessellated spheres and Haines' sphereflake ("A Proposal for
+//! Standard Graphics Environments", IEEE CG&A 1987, the SPD `balls` scene), used by the harness,
+//! the tests and the benchmarks.
+
+use glam::Vec3;
+
+use crate::geometry::TriangleMesh;
+
+/// A UV sphere of `stacks × slices` quads (poles as triangle fans), as vertices and triangles
+/// appended to `positions` and `indices`.
+pub fn append_uv_sphere(
+    positions: &mut Vec<Vec3>,
+    indices: &mut Vec<[u32; 3]>,
+    center: Vec3,
+    radius: f32,
+    stacks: u32,
+    slices: u32,
+) {
+    let stacks = stacks.max(2);
+    let slices = slices.max(3);
+    let base = positions.len() as u32;
+    positions.push(center + Vec3::Y * radius);
+    for i in 1..stacks {
+        let theta = std::f32::consts::PI * i as f32 / stacks as f32;
+        for j in 0..slices {
+            let phi = 2.0 * std::f32::consts::PI * j as f32 / slices as f32;
+            let d = Vec3::new(
+                theta.sin() * phi.cos(),
+                theta.cos(),
+                theta.sin() * phi.sin(),
+            );
+            positions.push(center + d * radius);
+        }
+    }
+    positions.push(center - Vec3::Y * radius);
+    let ring = |i: u32, j: u32| base + 1 + (i - 1) * slices + (j % slices);
+    let south = base + 1 + (stacks - 1) * slices;
+    for j in 0..slices {
+        indices.push([base, ring(1, j + 1), ring(1, j)]);
+        indices.push([south, ring(stacks - 1, j), ring(stacks - 1, j + 1)]);
+    }
+    for i in 1..stacks - 1 {
+        for j in 0..slices {
+            let (a, b, c, d) = (
+                ring(i, j),
+                ring(i, j + 1),
+                ring(i + 1, j),
+                ring(i + 1, j + 1),
+            );
+            indices.push([a, b, d]);
+            indices.push([a, d, c]);
+        }
+    }
+}
+
+/// A tessellated sphere as its own mesh.
+pub fn uv_sphere(center: Vec3, radius: f32, stacks: u32, slices: u32) -> TriangleMesh {
+    let (mut p, mut i) = (Vec::new(), Vec::new());
+    append_uv_sphere(&mut p, &mut i, center, radius, stacks, slices);
+    TriangleMesh::new("sphere", p, i).expect("indices are generated in range")
+}
+
+/// Haines' sphereflake: a unit sphere at the origin carrying nine spheres of a third its radius
+/// (six around its equator, three above), each carrying nine more, `levels` times; every sphere
+/// tessellated with `stacks × slices`. `levels = 3`, 12 × 24 gives 820 spheres, 433k triangles.
+pub fn sphereflake(levels: u32, stacks: u32, slices: u32) -> TriangleMesh {
+    let (mut p, mut idx) = (Vec::new(), Vec::new());
+    fn grow(
+        p: &mut Vec<Vec3>,
+        idx: &mut Vec<[u32; 3]>,
+        c: Vec3,
+        r: f32,
+        axis: Vec3,
+        level: u32,
+        stacks: u32,
+        slices: u32,
+    ) {
+        append_uv_sphere(p, idx, c, r, stacks, slices);
+        if level == 0 {
+            return;
+        }
+        let (t, b) = axis.any_orthonormal_pair();
+        let child_r = r / 3.0;
+        let mut place = |elevation: f32, azimuth: f32| {
+            let d = (axis * elevation.sin()
+                + (t * azimuth.cos() + b * azimuth.sin()) * elevation.cos())
+            .normalize();
+            grow(
+                p,
+                idx,
+                c + d * (r + child_r),
+                child_r,
+                d,
+                level - 1,
+                stacks,
+                slices,
+            );
+        };
+        let deg = std::f32::consts::PI / 180.0;
+        for k in 0..6 {
+            place(0.0, (60 * k) as f32 * deg);
+        }
+        for k in 0..3 {
+            place(60.0 * deg, (30 + 120 * k) as f32 * deg);
+        }
+    }
+    grow(
+        &mut p,
+        &mut idx,
+        Vec3::ZERO,
+        1.0,
+        Vec3::Y,
+        levels,
+        stacks,
+        slices,
+    );
+    TriangleMesh::new("sphereflake", p, idx).expect("indices are generated in range")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sphere_is_closed_and_counted() {
+        let m = uv_sphere(Vec3::ZERO, 1.0, 8, 16);
+        assert_eq!(m.triangle_count(), 2 * 8 * 16 - 2 * 16);
+        // Every edge used exactly twice, in opposite directions: closed and consistently wound.
+        let mut edges = std::collections::HashMap::new();
+        for t in m.indices() {
+            for k in 0..3 {
+                *edges.entry((t[k], t[(k + 1) % 3])).or_insert(0) += 1;
+            }
+        }
+        for (&(a, b), &n) in &edges {
+            assert_eq!(n, 1);
+            assert_eq!(edges.get(&(b, a)), Some(&1));
+        }
+        // Outward winding: normals point away from the centre.
+        for i in 0..m.triangle_count() {
+            let [a, b, c] = m.triangle(i);
+            assert!((b - a).cross(c - a).dot(a + b + c) > 0.0);
+        }
+    }
+
+    #[test]
+    fn sphereflake_counts() {
+        let m = sphereflake(2, 4, 6);
+        let per = 2 * 4 * 6 - 2 * 6;
+        assert_eq!(m.triangle_count(), (1 + 9 + 81) * per);
+    }
+}

@@ -1,0 +1,424 @@
+//! Rays and hits: one ray, an SoA packet of [`PACKET_WIDTH`] rays with an active-lane mask, and a
+//! stream of any length in SoA form.
+//!
+//! A ray is the segment `origin + t·dir` for `tnear < t <= tfar` (the depth test of Embree's
+//! default triangle test). `dir` need not be normalized: `t` is measured in units of `dir`, so it
+//! stays the same when a ray is transformed into another space (the seeds' instancing slides).
+
+use glam::Vec3;
+
+pub use crate::simd::PACKET_WIDTH;
+
+/// One ray.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ray {
+    pub origin: Vec3,
+    pub dir: Vec3,
+    /// Start of the segment (exclusive).
+    pub tnear: f32,
+    /// End of the segment (inclusive); `f32::INFINITY` for an unbounded ray.
+    pub tfar: f32,
+}
+
+impl Ray {
+    /// A ray over `(0, +inf]`.
+    pub fn new(origin: Vec3, dir: Vec3) -> Self {
+        Self {
+            origin,
+            dir,
+            tnear: 0.0,
+            tfar: f32::INFINITY,
+        }
+    }
+
+    /// A ray over `(tnear, tfar]`.
+    pub fn segment(origin: Vec3, dir: Vec3, tnear: f32, tfar: f32) -> Self {
+        Self {
+            origin,
+            dir,
+            tnear,
+            tfar,
+        }
+    }
+
+    /// The point at parameter `t`.
+    pub fn at(&self, t: f32) -> Vec3 {
+        self.origin + self.dir * t
+    }
+
+    /// Whether the ray can hit anything. Rays with a NaN or infinite origin or direction, a zero
+    /// direction, a NaN bound, or `tnear > tfar` are invalid; every query answers them with a miss
+    /// (and "not occluded") instead of an error, so that one bad ray cannot spoil a batch.
+    pub fn is_valid(&self) -> bool {
+        self.origin.is_finite()
+            && self.dir.is_finite()
+            && self.dir != Vec3::ZERO
+            && !self.tnear.is_nan()
+            && !self.tfar.is_nan()
+            && self.tnear <= self.tfar
+    }
+}
+
+/// A ray–surface intersection.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    /// Ray parameter of the hit point, in units of the ray's direction.
+    pub t: f32,
+    /// Barycentric coordinates: the hit point is `(1 − u − v)·v0 + u·v1 + v·v2`.
+    pub u: f32,
+    pub v: f32,
+    /// Unnormalized geometric normal `(v1 − v0) × (v2 − v0)` in world space.
+    pub ng: Vec3,
+    /// Index of the triangle within its geometry.
+    pub prim_id: u32,
+    /// Index of the geometry (mesh) within the scene.
+    pub geom_id: u32,
+}
+
+/// Marks a miss in the SoA hit containers.
+pub const INVALID_ID: u32 = u32::MAX;
+
+/// Up to [`PACKET_WIDTH`] rays in SoA form, with a bit mask of the active lanes.
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(64))]
+pub struct RayPacket {
+    pub ox: [f32; PACKET_WIDTH],
+    pub oy: [f32; PACKET_WIDTH],
+    pub oz: [f32; PACKET_WIDTH],
+    pub dx: [f32; PACKET_WIDTH],
+    pub dy: [f32; PACKET_WIDTH],
+    pub dz: [f32; PACKET_WIDTH],
+    pub tnear: [f32; PACKET_WIDTH],
+    pub tfar: [f32; PACKET_WIDTH],
+    /// Bit `i` set: lane `i` takes part in the query.
+    pub active: u32,
+}
+
+impl Default for RayPacket {
+    fn default() -> Self {
+        Self {
+            ox: [0.0; PACKET_WIDTH],
+            oy: [0.0; PACKET_WIDTH],
+            oz: [0.0; PACKET_WIDTH],
+            dx: [0.0; PACKET_WIDTH],
+            dy: [0.0; PACKET_WIDTH],
+            dz: [0.0; PACKET_WIDTH],
+            tnear: [0.0; PACKET_WIDTH],
+            tfar: [0.0; PACKET_WIDTH],
+            active: 0,
+        }
+    }
+}
+
+impl RayPacket {
+    /// Packs up to [`PACKET_WIDTH`] rays; lanes past `rays.len()` are inactive. Extra rays are
+    /// ignored.
+    pub fn from_rays(rays: &[Ray]) -> Self {
+        let mut p = Self::default();
+        for (i, r) in rays.iter().take(PACKET_WIDTH).enumerate() {
+            p.set(i, r);
+        }
+        p
+    }
+
+    /// Writes lane `lane` and marks it active.
+    pub fn set(&mut self, lane: usize, r: &Ray) {
+        self.ox[lane] = r.origin.x;
+        self.oy[lane] = r.origin.y;
+        self.oz[lane] = r.origin.z;
+        self.dx[lane] = r.dir.x;
+        self.dy[lane] = r.dir.y;
+        self.dz[lane] = r.dir.z;
+        self.tnear[lane] = r.tnear;
+        self.tfar[lane] = r.tfar;
+        self.active |= 1 << lane;
+    }
+
+    /// Reads lane `lane`.
+    pub fn get(&self, lane: usize) -> Ray {
+        Ray {
+            origin: Vec3::new(self.ox[lane], self.oy[lane], self.oz[lane]),
+            dir: Vec3::new(self.dx[lane], self.dy[lane], self.dz[lane]),
+            tnear: self.tnear[lane],
+            tfar: self.tfar[lane],
+        }
+    }
+
+    /// Whether lane `lane` is active.
+    pub fn is_active(&self, lane: usize) -> bool {
+        lane < PACKET_WIDTH && self.active & (1 << lane) != 0
+    }
+}
+
+/// Closest hits of a [`RayPacket`] in SoA form; a missed or inactive lane has `t = +inf` and
+/// `prim_id = geom_id = INVALID_ID`.
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(64))]
+pub struct HitPacket {
+    pub t: [f32; PACKET_WIDTH],
+    pub u: [f32; PACKET_WIDTH],
+    pub v: [f32; PACKET_WIDTH],
+    pub ng_x: [f32; PACKET_WIDTH],
+    pub ng_y: [f32; PACKET_WIDTH],
+    pub ng_z: [f32; PACKET_WIDTH],
+    pub prim_id: [u32; PACKET_WIDTH],
+    pub geom_id: [u32; PACKET_WIDTH],
+}
+
+impl Default for HitPacket {
+    fn default() -> Self {
+        Self {
+            t: [f32::INFINITY; PACKET_WIDTH],
+            u: [0.0; PACKET_WIDTH],
+            v: [0.0; PACKET_WIDTH],
+            ng_x: [0.0; PACKET_WIDTH],
+            ng_y: [0.0; PACKET_WIDTH],
+            ng_z: [0.0; PACKET_WIDTH],
+            prim_id: [INVALID_ID; PACKET_WIDTH],
+            geom_id: [INVALID_ID; PACKET_WIDTH],
+        }
+    }
+}
+
+impl HitPacket {
+    /// The hit of lane `lane`, if it hit anything.
+    pub fn get(&self, lane: usize) -> Option<Hit> {
+        (self.prim_id[lane] != INVALID_ID).then(|| Hit {
+            t: self.t[lane],
+            u: self.u[lane],
+            v: self.v[lane],
+            ng: Vec3::new(self.ng_x[lane], self.ng_y[lane], self.ng_z[lane]),
+            prim_id: self.prim_id[lane],
+            geom_id: self.geom_id[lane],
+        })
+    }
+
+    /// Writes lane `lane` (a miss for `None`).
+    pub fn set(&mut self, lane: usize, hit: Option<Hit>) {
+        match hit {
+            Some(h) => {
+                self.t[lane] = h.t;
+                self.u[lane] = h.u;
+                self.v[lane] = h.v;
+                self.ng_x[lane] = h.ng.x;
+                self.ng_y[lane] = h.ng.y;
+                self.ng_z[lane] = h.ng.z;
+                self.prim_id[lane] = h.prim_id;
+                self.geom_id[lane] = h.geom_id;
+            }
+            None => {
+                self.t[lane] = f32::INFINITY;
+                self.prim_id[lane] = INVALID_ID;
+                self.geom_id[lane] = INVALID_ID;
+            }
+        }
+    }
+}
+
+/// Any number of rays in SoA form: one vector per component.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct RayStream {
+    pub ox: Vec<f32>,
+    pub oy: Vec<f32>,
+    pub oz: Vec<f32>,
+    pub dx: Vec<f32>,
+    pub dy: Vec<f32>,
+    pub dz: Vec<f32>,
+    pub tnear: Vec<f32>,
+    pub tfar: Vec<f32>,
+}
+
+impl RayStream {
+    /// An empty stream with room for `n` rays.
+    pub fn with_capacity(n: usize) -> Self {
+        let v = || Vec::with_capacity(n);
+        Self {
+            ox: v(),
+            oy: v(),
+            oz: v(),
+            dx: v(),
+            dy: v(),
+            dz: v(),
+            tnear: v(),
+            tfar: v(),
+        }
+    }
+
+    /// Number of rays. The component vectors are expected to have equal lengths; if they do not,
+    /// the shortest one counts.
+    pub fn len(&self) -> usize {
+        [
+            self.ox.len(),
+            self.oy.len(),
+            self.oz.len(),
+            self.dx.len(),
+            self.dy.len(),
+            self.dz.len(),
+            self.tnear.len(),
+            self.tfar.len(),
+        ]
+        .into_iter()
+        .min()
+        .unwrap_or(0)
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    pub fn push(&mut self, r: &Ray) {
+        self.ox.push(r.origin.x);
+        self.oy.push(r.origin.y);
+        self.oz.push(r.origin.z);
+        self.dx.push(r.dir.x);
+        self.dy.push(r.dir.y);
+        self.dz.push(r.dir.z);
+        self.tnear.push(r.tnear);
+        self.tfar.push(r.tfar);
+    }
+
+    /// Ray `i`. Panics if `i >= len()`, like slice indexing.
+    pub fn get(&self, i: usize) -> Ray {
+        Ray {
+            origin: Vec3::new(self.ox[i], self.oy[i], self.oz[i]),
+            dir: Vec3::new(self.dx[i], self.dy[i], self.dz[i]),
+            tnear: self.tnear[i],
+            tfar: self.tfar[i],
+        }
+    }
+
+    /// The rays `start..start + n` (clamped to the stream) as a packet.
+    pub fn packet(&self, start: usize, n: usize) -> RayPacket {
+        let n = n.min(PACKET_WIDTH).min(self.len().saturating_sub(start));
+        let mut p = RayPacket::default();
+        p.ox[..n].copy_from_slice(&self.ox[start..start + n]);
+        p.oy[..n].copy_from_slice(&self.oy[start..start + n]);
+        p.oz[..n].copy_from_slice(&self.oz[start..start + n]);
+        p.dx[..n].copy_from_slice(&self.dx[start..start + n]);
+        p.dy[..n].copy_from_slice(&self.dy[start..start + n]);
+        p.dz[..n].copy_from_slice(&self.dz[start..start + n]);
+        p.tnear[..n].copy_from_slice(&self.tnear[start..start + n]);
+        p.tfar[..n].copy_from_slice(&self.tfar[start..start + n]);
+        p.active = crate::simd::low_bits(n);
+        p
+    }
+}
+
+impl FromIterator<Ray> for RayStream {
+    fn from_iter<I: IntoIterator<Item = Ray>>(iter: I) -> Self {
+        let mut s = Self::default();
+        for r in iter {
+            s.push(&r);
+        }
+        s
+    }
+}
+
+/// Closest hits of a [`RayStream`] in SoA form (misses as in [`HitPacket`]).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct HitStream {
+    pub t: Vec<f32>,
+    pub u: Vec<f32>,
+    pub v: Vec<f32>,
+    pub ng_x: Vec<f32>,
+    pub ng_y: Vec<f32>,
+    pub ng_z: Vec<f32>,
+    pub prim_id: Vec<u32>,
+    pub geom_id: Vec<u32>,
+}
+
+impl HitStream {
+    /// `n` misses.
+    pub fn misses(n: usize) -> Self {
+        Self {
+            t: vec![f32::INFINITY; n],
+            u: vec![0.0; n],
+            v: vec![0.0; n],
+            ng_x: vec![0.0; n],
+            ng_y: vec![0.0; n],
+            ng_z: vec![0.0; n],
+            prim_id: vec![INVALID_ID; n],
+            geom_id: vec![INVALID_ID; n],
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.t.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.t.is_empty()
+    }
+
+    /// Resizes to `n` entries, all misses.
+    pub fn reset(&mut self, n: usize) {
+        *self = Self::misses(n);
+    }
+
+    /// Hit `i`, if ray `i` hit anything.
+    pub fn get(&self, i: usize) -> Option<Hit> {
+        (self.prim_id[i] != INVALID_ID).then(|| Hit {
+            t: self.t[i],
+            u: self.u[i],
+            v: self.v[i],
+            ng: Vec3::new(self.ng_x[i], self.ng_y[i], self.ng_z[i]),
+            prim_id: self.prim_id[i],
+            geom_id: self.geom_id[i],
+        })
+    }
+
+    /// Writes entry `i` (a miss for `None`).
+    pub fn set(&mut self, i: usize, hit: Option<Hit>) {
+        match hit {
+            Some(h) => {
+                self.t[i] = h.t;
+                self.u[i] = h.u;
+                self.v[i] = h.v;
+                self.ng_x[i] = h.ng.x;
+                self.ng_y[i] = h.ng.y;
+                self.ng_z[i] = h.ng.z;
+                self.prim_id[i] = h.prim_id;
+                self.geom_id[i] = h.geom_id;
+            }
+            None => {
+                self.t[i] = f32::INFINITY;
+                self.prim_id[i] = INVALID_ID;
+                self.geom_id[i] = INVALID_ID;
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn validity() {
+        let o = Vec3::ZERO;
+        assert!(Ray::new(o, Vec3::X).is_valid());
+        assert!(!Ray::new(o, Vec3::ZERO).is_valid());
+        assert!(!Ray::new(Vec3::NAN, Vec3::X).is_valid());
+        assert!(!Ray::new(o, Vec3::new(f32::INFINITY, 0.0, 0.0)).is_valid());
+        assert!(!Ray::segment(o, Vec3::X, 2.0, 1.0).is_valid());
+        assert!(!Ray::segment(o, Vec3::X, f32::NAN, 1.0).is_valid());
+        assert!(Ray::segment(o, Vec3::X, 1.0, 1.0).is_valid());
+    }
+
+    #[test]
+    fn packet_round_trip() {
+        let rays: Vec<Ray> = (0..5)
+            .map(|i| Ray::new(Vec3::splat(i as f32), Vec3::new(1.0, i as f32, 2.0)))
+            .collect();
+        let p = RayPacket::from_rays(&rays);
+        assert_eq!(p.active, 0b11111);
+        for (i, r) in rays.iter().enumerate() {
+            assert_eq!(p.get(i), *r);
+        }
+        let s: RayStream = rays.iter().copied().collect();
+        assert_eq!(s.len(), 5);
+        let q = s.packet(3, 16);
+        assert_eq!(q.active, 0b11);
+        assert_eq!(q.get(1), rays[4]);
+    }
+}

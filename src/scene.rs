@@ -1,0 +1,307 @@
+//! The public query API: a built [`Scene`] answers closest-hit (`intersect*`) and any-hit
+//! (`occluded*`) queries for single rays, packets and streams, serially or in parallel.
+//!
+//! A `Scene` is immutable once built, `Send + Sync`, and can be queried from many threads at once.
+
+use std::path::Path;
+
+use glam::Vec3;
+use rayon::prelude::*;
+
+use crate::bvh::traverse::PacketHits;
+use crate::bvh::{BuildConfig, BuildStats, Bvh};
+use crate::error::Result;
+use crate::geometry::{TriangleMesh, load_obj};
+use crate::ray::{Hit, HitPacket, HitStream, INVALID_ID, PACKET_WIDTH, Ray, RayPacket, RayStream};
+
+/// How a stream query groups its rays.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Coherence {
+    /// Neighbouring rays take similar paths (camera rays in 4×4 tiles, shadow rays from them
+    /// towards one light): the stream is traced as packets of [`PACKET_WIDTH`] consecutive rays.
+    Coherent,
+    /// Rays are unrelated (diffuse bounces): each ray is traced on its own, SIMD over a node's
+    /// children and a leaf's triangles.
+    Incoherent,
+}
+
+/// Rays per parallel work item of the `*_par` stream queries (a multiple of [`PACKET_WIDTH`]).
+pub const STREAM_CHUNK: usize = 4096;
+
+/// Meshes and the BVH over them.
+#[derive(Clone, Debug)]
+pub struct Scene {
+    meshes: Vec<TriangleMesh>,
+    bvh: Bvh,
+}
+
+impl Scene {
+    /// Builds the BVH over `meshes` on the current rayon pool. Geometry ids are indices into
+    /// `meshes`. An empty list gives an empty scene that every ray misses.
+    pub fn build(meshes: Vec<TriangleMesh>, config: &BuildConfig) -> Result<Self> {
+        let bvh = Bvh::build(&meshes, config)?;
+        Ok(Self { meshes, bvh })
+    }
+
+    /// Loads an OBJ file (one geometry per object/group) and builds it.
+    pub fn from_obj(path: impl AsRef<Path>, config: &BuildConfig) -> Result<Self> {
+        Self::build(load_obj(path)?, config)
+    }
+
+    pub fn meshes(&self) -> &[TriangleMesh] {
+        &self.meshes
+    }
+
+    pub fn stats(&self) -> &BuildStats {
+        &self.bvh.stats
+    }
+
+    /// Bounds of the hittable triangles, or `None` for an empty scene.
+    pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
+        self.bvh.bounds
+    }
+
+    /// Number of triangles over all meshes (hittable or not).
+    pub fn triangle_count(&self) -> usize {
+        self.meshes.iter().map(|m| m.triangle_count()).sum()
+    }
+
+    /// The closest hit of `ray` in `(tnear, tfar]`, or `None`. Invalid rays (see
+    /// [`Ray::is_valid`]) miss.
+    pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
+        self.bvh
+            .trace1::<false>(ray)
+            .map(|h| self.bvh.hit_record(&h))
+    }
+
+    /// Whether anything lies on `ray` in `(tnear, tfar]`. Invalid rays are not occluded.
+    pub fn occluded(&self, ray: &Ray) -> bool {
+        self.bvh.trace1::<true>(ray).is_some()
+    }
+
+    /// Closest hits of the active lanes of `rays`; inactive lanes are written as misses.
+    pub fn intersect_packet(&self, rays: &RayPacket, hits: &mut HitPacket) {
+        let r = self.bvh.trace_packet::<false>(rays);
+        *hits = HitPacket::default();
+        for lane in 0..PACKET_WIDTH {
+            if r.mask & (1 << lane) != 0 {
+                hits.set(lane, Some(self.packet_hit(&r, lane)));
+            }
+        }
+    }
+
+    /// Bit mask of the active lanes of `rays` that are occluded.
+    pub fn occluded_packet(&self, rays: &RayPacket) -> u32 {
+        self.bvh.trace_packet::<true>(rays).mask
+    }
+
+    fn packet_hit(&self, r: &PacketHits, lane: usize) -> Hit {
+        let h = crate::bvh::traverse::LeafHit {
+            block: r.block[lane],
+            lane: r.lane[lane],
+            t: r.t[lane],
+            u: r.u[lane],
+            v: r.v[lane],
+        };
+        self.bvh.hit_record(&h)
+    }
+
+    /// Closest hits of every ray of a stream; `hits` is resized to the stream's length.
+    pub fn intersect_stream(&self, rays: &RayStream, hits: &mut HitStream, coherence: Coherence) {
+        hits.reset(rays.len());
+        self.intersect_range(rays, 0, HitSlice::of(hits), coherence);
+    }
+
+    /// Occlusion of every ray of a stream; `occluded` is resized to the stream's length.
+    pub fn occluded_stream(
+        &self,
+        rays: &RayStream,
+        occluded: &mut Vec<bool>,
+        coherence: Coherence,
+    ) {
+        occluded.clear();
+        occluded.resize(rays.len(), false);
+        self.occluded_range(rays, 0, occluded, coherence);
+    }
+
+    /// [`intersect_stream`](Self::intersect_stream) spread over the current rayon pool in chunks
+    /// of [`STREAM_CHUNK`] rays.
+    pub fn intersect_stream_par(
+        &self,
+        rays: &RayStream,
+        hits: &mut HitStream,
+        coherence: Coherence,
+    ) {
+        hits.reset(rays.len());
+        let c = STREAM_CHUNK;
+        let h = hits;
+        (
+            h.t.par_chunks_mut(c),
+            h.u.par_chunks_mut(c),
+            h.v.par_chunks_mut(c),
+            h.ng_x.par_chunks_mut(c),
+            h.ng_y.par_chunks_mut(c),
+            h.ng_z.par_chunks_mut(c),
+            h.prim_id.par_chunks_mut(c),
+            h.geom_id.par_chunks_mut(c),
+        )
+            .into_par_iter()
+            .enumerate()
+            .for_each(|(i, (t, u, v, ng_x, ng_y, ng_z, prim_id, geom_id))| {
+                let out = HitSlice {
+                    t,
+                    u,
+                    v,
+                    ng_x,
+                    ng_y,
+                    ng_z,
+                    prim_id,
+                    geom_id,
+                };
+                self.intersect_range(rays, i * c, out, coherence);
+            });
+    }
+
+    /// [`occluded_stream`](Self::occluded_stream) spread over the current rayon pool.
+    pub fn occluded_stream_par(
+        &self,
+        rays: &RayStream,
+        occluded: &mut Vec<bool>,
+        coherence: Coherence,
+    ) {
+        occluded.clear();
+        occluded.resize(rays.len(), false);
+        occluded
+            .par_chunks_mut(STREAM_CHUNK)
+            .enumerate()
+            .for_each(|(i, out)| self.occluded_range(rays, i * STREAM_CHUNK, out, coherence));
+    }
+
+    /// Rays `start..start + out.len()` of `rays` into `out`.
+    fn intersect_range(
+        &self,
+        rays: &RayStream,
+        start: usize,
+        mut out: HitSlice<'_>,
+        coherence: Coherence,
+    ) {
+        let n = out.len();
+        match coherence {
+            Coherence::Coherent => {
+                for k in (0..n).step_by(PACKET_WIDTH) {
+                    let p = rays.packet(start + k, (n - k).min(PACKET_WIDTH));
+                    let r = self.bvh.trace_packet::<false>(&p);
+                    let mut bits = r.mask;
+                    while bits != 0 {
+                        let lane = bits.trailing_zeros() as usize;
+                        bits &= bits - 1;
+                        out.set(k + lane, &self.packet_hit(&r, lane));
+                    }
+                }
+            }
+            Coherence::Incoherent => {
+                for k in 0..n {
+                    if let Some(h) = self.intersect(&rays.get(start + k)) {
+                        out.set(k, &h);
+                    }
+                }
+            }
+        }
+    }
+
+    fn occluded_range(
+        &self,
+        rays: &RayStream,
+        start: usize,
+        out: &mut [bool],
+        coherence: Coherence,
+    ) {
+        let n = out.len();
+        match coherence {
+            Coherence::Coherent => {
+                for k in (0..n).step_by(PACKET_WIDTH) {
+                    let m = (n - k).min(PACKET_WIDTH);
+                    let bits = self.occluded_packet(&rays.packet(start + k, m));
+                    for (lane, o) in out[k..k + m].iter_mut().enumerate() {
+                        *o = bits & (1 << lane) != 0;
+                    }
+                }
+            }
+            Coherence::Incoherent => {
+                for (k, o) in out.iter_mut().enumerate() {
+                    *o = self.occluded(&rays.get(start + k));
+                }
+            }
+        }
+    }
+
+    /// The closest hit by testing every triangle, with the same triangle test as the BVH: the
+    /// reference the BVH is tested against. O(triangles) per ray.
+    pub fn intersect_brute_force(&self, ray: &Ray) -> Option<Hit> {
+        if !ray.is_valid() {
+            return None;
+        }
+        let r4 = crate::geometry::triangle::Ray4::new(ray.origin, ray.dir);
+        let mut tfar = ray.tfar;
+        let mut best = None;
+        for (bi, b) in self.bvh.blocks.iter().enumerate() {
+            if let Some((lane, t, u, v)) =
+                crate::geometry::triangle::intersect1(b, &r4, ray.tnear, tfar)
+            {
+                tfar = t;
+                best = Some(crate::bvh::traverse::LeafHit {
+                    block: bi as u32,
+                    lane: lane as u32,
+                    t,
+                    u,
+                    v,
+                });
+            }
+        }
+        best.map(|h| self.bvh.hit_record(&h))
+    }
+}
+
+/// Mutable views of one range of a [`HitStream`].
+struct HitSlice<'a> {
+    t: &'a mut [f32],
+    u: &'a mut [f32],
+    v: &'a mut [f32],
+    ng_x: &'a mut [f32],
+    ng_y: &'a mut [f32],
+    ng_z: &'a mut [f32],
+    prim_id: &'a mut [u32],
+    geom_id: &'a mut [u32],
+}
+
+impl<'a> HitSlice<'a> {
+    fn of(h: &'a mut HitStream) -> Self {
+        Self {
+            t: &mut h.t,
+            u: &mut h.u,
+            v: &mut h.v,
+            ng_x: &mut h.ng_x,
+            ng_y: &mut h.ng_y,
+            ng_z: &mut h.ng_z,
+            prim_id: &mut h.prim_id,
+            geom_id: &mut h.geom_id,
+        }
+    }
+
+    fn len(&self) -> usize {
+        self.t.len()
+    }
+
+    #[inline]
+    fn set(&mut self, i: usize, h: &Hit) {
+        debug_assert!(h.prim_id != INVALID_ID);
+        self.t[i] = h.t;
+        self.u[i] = h.u;
+        self.v[i] = h.v;
+        self.ng_x[i] = h.ng.x;
+        self.ng_y[i] = h.ng.y;
+        self.ng_z[i] = h.ng.z;
+        self.prim_id[i] = h.prim_id;
+        self.geom_id[i] = h.geom_id;
+    }
+}

@@ -1,0 +1,182 @@
+//! The BVH finds exactly what testing every triangle finds, with the same triangle test.
+
+mod common;
+
+use common::*;
+use glam::Vec3;
+use strahl::{
+    BuildConfig, Camera, Coherence, HitStream, Ray, RayStream, Scene, procedural, raygen,
+};
+
+fn check_scene(scene: &Scene, rays: &[Ray], what: &str) -> usize {
+    let mut hits = 0;
+    for (i, r) in rays.iter().enumerate() {
+        let bvh = scene.intersect(r);
+        let brute = scene.intersect_brute_force(r);
+        assert_same_hit(bvh, brute, 1e-6, &format!("{what} ray {i}"));
+        assert_eq!(
+            scene.occluded(r),
+            brute.is_some(),
+            "{what} ray {i}: occluded"
+        );
+        hits += brute.is_some() as usize;
+    }
+    hits
+}
+
+#[test]
+fn random_soups_match_brute_force() {
+    for (seed, n, size) in [(1, 10, 0.5), (2, 1000, 0.1), (3, 20_000, 0.02)] {
+        let scene = scene_of(vec![random_soup(seed, n, size)]);
+        let rays = random_rays(seed, 4000);
+        let hits = check_scene(&scene, &rays, &format!("soup {n}"));
+        assert!(
+            hits > 100 && hits < rays.len(),
+            "test rays should both hit and miss ({hits})"
+        );
+    }
+}
+
+#[test]
+fn every_build_preset_matches_brute_force() {
+    let mesh = random_soup(9, 3000, 0.05);
+    let rays = random_rays(9, 2000);
+    for cfg in [
+        BuildConfig::default(),
+        BuildConfig::fast(),
+        BuildConfig {
+            min_leaf: 1,
+            max_leaf: 1,
+            ..BuildConfig::default()
+        },
+        BuildConfig {
+            max_leaf: 60,
+            ..BuildConfig::default()
+        },
+        BuildConfig {
+            parallel_threshold: 64,
+            ..BuildConfig::default()
+        },
+    ] {
+        let scene = Scene::build(vec![mesh.clone()], &cfg).unwrap();
+        check_scene(&scene, &rays, &format!("{cfg:?}"));
+    }
+}
+
+#[test]
+fn tied_and_flat_geometry_matches_brute_force() {
+    // A grid of coplanar quads (flat boxes, shared edges) hit by axis-parallel and grazing rays.
+    let mut p = Vec::new();
+    let mut idx = Vec::new();
+    for j in 0..20 {
+        for i in 0..20 {
+            let b = p.len() as u32;
+            let (x, z) = (i as f32 * 0.1, j as f32 * 0.1);
+            p.extend([
+                Vec3::new(x, 0.0, z),
+                Vec3::new(x + 0.1, 0.0, z),
+                Vec3::new(x + 0.1, 0.0, z + 0.1),
+                Vec3::new(x, 0.0, z + 0.1),
+            ]);
+            idx.extend([[b, b + 1, b + 2], [b, b + 2, b + 3]]);
+        }
+    }
+    let scene = scene_of(vec![strahl::TriangleMesh::new("grid", p, idx).unwrap()]);
+    let mut rays = Vec::new();
+    let mut rng = strahl::raygen::Pcg32::new(4, 4);
+    for _ in 0..3000 {
+        let o = Vec3::new(rng.next_f32() * 2.0, 1.0, rng.next_f32() * 2.0);
+        rays.push(Ray::new(o, Vec3::new(0.0, -1.0, 0.0)));
+        rays.push(Ray::new(
+            o,
+            Vec3::new(rng.next_f32() - 0.5, -1.0, rng.next_f32() - 0.5),
+        ));
+    }
+    let hits = check_scene(&scene, &rays, "grid");
+    assert!(hits > 2000);
+}
+
+#[test]
+fn real_meshes_match_brute_force() {
+    let mut scenes: Vec<(String, Scene, Camera)> = Vec::new();
+    let cornell = Scene::from_obj(data("cornell_box.obj"), &BuildConfig::default()).unwrap();
+    assert_eq!(cornell.triangle_count(), 32);
+    let cam = Camera::look_at(
+        Vec3::new(278.0, 273.0, -450.0),
+        Vec3::new(278.0, 273.0, 0.0),
+        Vec3::Y,
+        60.0,
+    );
+    scenes.push(("cornell".into(), cornell, cam));
+    let flake = scene_of(vec![procedural::sphereflake(2, 6, 12)]);
+    let cam = Camera::look_at(
+        Vec3::new(0.0, 1.2, 4.5),
+        Vec3::new(0.0, 0.3, 0.0),
+        Vec3::Y,
+        60.0,
+    );
+    scenes.push(("sphereflake".into(), flake, cam));
+    if let Some(p) = shared_scene("bunny/bunny.obj") {
+        let cam = Camera::look_at(
+            Vec3::new(-0.017, 0.13, 0.17),
+            Vec3::new(-0.017, 0.10, 0.0),
+            Vec3::Y,
+            60.0,
+        );
+        scenes.push((
+            "bunny".into(),
+            Scene::from_obj(p, &BuildConfig::default()).unwrap(),
+            cam,
+        ));
+    }
+    for (name, scene, cam) in &scenes {
+        let (primary, _) = raygen::primary(cam, 48, 48);
+        let rays: Vec<Ray> = (0..primary.len()).map(|i| primary.get(i)).collect();
+        let hits = check_scene(scene, &rays, name);
+        assert!(hits > 0, "{name}: the camera should see the scene");
+        // Secondary rays from the hit points, with a tiny tnear, exercise rays starting on surfaces.
+        let mut h = HitStream::default();
+        scene.intersect_stream(&primary, &mut h, Coherence::Incoherent);
+        let diag = scene.bounds().map(|(lo, hi)| (hi - lo).length()).unwrap();
+        let (diffuse, _) = raygen::diffuse(&primary, &h, 5, 1e-4 * diag);
+        let (shadow, _) = raygen::shadow(&primary, &h, cam.eye + Vec3::Y * diag * 0.3, 1e-4 * diag);
+        for s in [&diffuse, &shadow] {
+            let rays: Vec<Ray> = (0..s.len()).map(|i| s.get(i)).collect();
+            check_scene(scene, &rays, name);
+        }
+    }
+}
+
+#[test]
+fn far_from_origin_matches_brute_force() {
+    for offset in [1e3f32, 1e5, 1e6] {
+        let mut mesh = random_soup(21, 2000, 0.05);
+        let shift = Vec3::new(offset, -offset * 0.5, offset * 0.25);
+        mesh.map_positions(|p| p + shift);
+        let scene = scene_of(vec![mesh]);
+        let rays: Vec<Ray> = random_rays(21, 2000)
+            .into_iter()
+            .map(|r| Ray::new(r.origin + shift, r.dir))
+            .collect();
+        check_scene(&scene, &rays, &format!("offset {offset}"));
+    }
+}
+
+#[test]
+fn streams_of_any_length() {
+    let scene = scene_of(vec![random_soup(3, 500, 0.1)]);
+    for n in [0usize, 1, 15, 16, 17, 4097] {
+        let rays: RayStream = random_rays(n as u64, n).into_iter().collect();
+        let mut hits = HitStream::default();
+        scene.intersect_stream_par(&rays, &mut hits, Coherence::Coherent);
+        assert_eq!(hits.len(), n);
+        for i in 0..n {
+            assert_same_hit(
+                hits.get(i),
+                scene.intersect_brute_force(&rays.get(i)),
+                1e-6,
+                "stream",
+            );
+        }
+    }
+}
