@@ -350,9 +350,22 @@ impl HitStream {
         self.t.is_empty()
     }
 
-    /// Resizes to `n` entries, all misses.
+    /// Resizes to `n` entries, all misses, reusing the allocations.
     pub fn reset(&mut self, n: usize) {
-        *self = Self::misses(n);
+        let fill = |v: &mut Vec<f32>, x: f32| {
+            v.clear();
+            v.resize(n, x);
+        };
+        fill(&mut self.t, f32::INFINITY);
+        fill(&mut self.u, 0.0);
+        fill(&mut self.v, 0.0);
+        fill(&mut self.ng_x, 0.0);
+        fill(&mut self.ng_y, 0.0);
+        fill(&mut self.ng_z, 0.0);
+        for ids in [&mut self.prim_id, &mut self.geom_id] {
+            ids.clear();
+            ids.resize(n, INVALID_ID);
+        }
     }
 
     /// Hit `i`, if ray `i` hit anything.

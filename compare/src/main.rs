@@ -1,1 +1,239 @@
-fn main() {}
+//! `compare`: trace the same rays with strahl and Embree, report speed and accuracy side by side.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, bail};
+use clap::Parser;
+use compare::harness::{self, Answers, Class, Settings};
+use compare::{embree, rayfile, report, scenes};
+use indicatif::{ProgressBar, ProgressStyle};
+
+/// Trace the same rays with strahl and Intel Embree 3 on the same threads; report Mrays/s per
+/// engine, API and ray class, build times, and hit agreement decided in float64.
+#[derive(Parser, Debug)]
+#[command(version, about)]
+struct Args {
+    /// OBJ files or folders holding one. Without any: the scenes in data/ (or the shared ones with
+    /// --shared).
+    scenes: Vec<PathBuf>,
+    /// Run the seven shared benchmark scenes from ../shared/scenes with their cameras and lights.
+    #[arg(long)]
+    shared: bool,
+    /// Also run the project's data/ scenes (with --shared or explicit scenes).
+    #[arg(long)]
+    data: bool,
+    /// Image width and height in pixels (primary rays = width²).
+    #[arg(long, default_value_t = 1024)]
+    width: u32,
+    /// Timed passes after one warm-up pass.
+    #[arg(long, default_value_t = 5)]
+    passes: usize,
+    /// Tracing and build threads for both engines.
+    #[arg(long, default_value_t = 2)]
+    threads: usize,
+    /// Output folder for report.md, ratio.png and the scene pictures.
+    #[arg(long, default_value = "out")]
+    out: PathBuf,
+    /// Write all figures as JSON to this file.
+    #[arg(long)]
+    json: Option<PathBuf>,
+    /// Write every ray set and both engines' hits to this folder (BENCHMARKING.md formats).
+    #[arg(long)]
+    dump_rays: Option<PathBuf>,
+    /// Trace a ray file with both engines on the scene given as the one positional argument.
+    #[arg(long)]
+    trace_rays: Option<PathBuf>,
+    /// With --trace-rays: any-hit (occlusion) queries instead of closest hits.
+    #[arg(long)]
+    occlusion: bool,
+    /// Write the generated sphereflake to this OBJ file and exit.
+    #[arg(long)]
+    write_obj: Option<PathBuf>,
+    /// Exit with an error if any scene and class has hit/miss agreement below this fraction.
+    #[arg(long)]
+    min_agreement: Option<f64>,
+}
+
+fn project_dir(rel: &str) -> PathBuf {
+    let here = Path::new(rel);
+    if here.exists() {
+        return here.to_path_buf();
+    }
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(rel)
+}
+
+fn main() -> anyhow::Result<()> {
+    let args = Args::parse();
+    if let Some(p) = &args.write_obj {
+        return write_sphereflake(p);
+    }
+    if args.threads == 0 || args.width == 0 {
+        bail!("--threads and --width must be positive");
+    }
+    let pool = compare::pool(args.threads)?;
+    let device = embree::Device::new(&format!("threads={}", args.threads))?;
+    if let Some(rays) = &args.trace_rays {
+        return trace_file(&args, rays, &pool, &device);
+    }
+
+    let mut specs = Vec::new();
+    if args.shared {
+        let root = project_dir("../shared/scenes");
+        let found = scenes::shared(&root);
+        if found.is_empty() {
+            bail!("--shared: no scenes found under {}", root.display());
+        }
+        specs.extend(found);
+    }
+    for p in &args.scenes {
+        specs.push(scenes::from_path(p)?);
+    }
+    if specs.is_empty() || args.data {
+        specs.extend(scenes::data(&project_dir("data")));
+    }
+
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
+    let settings = Settings {
+        width: args.width,
+        passes: args.passes,
+        keep_rays: args.dump_rays.is_some(),
+        ..Settings::default()
+    };
+    let bar = ProgressBar::new((specs.len() * 5) as u64);
+    bar.set_style(
+        ProgressStyle::with_template("{bar:40} {pos}/{len} {elapsed} {msg}")
+            .expect("valid template"),
+    );
+    let mut results = Vec::new();
+    for spec in &specs {
+        let r = harness::run_scene(spec, &pool, &device, &settings, |step| {
+            bar.set_message(format!("{}: {step}", spec.name));
+            bar.inc(1);
+        })?;
+        report::write_image(&args.out.join(format!("{}.png", r.name)), &r.image, r.width)?;
+        if let Some(dir) = &args.dump_rays {
+            dump(dir, spec, &r)?;
+        }
+        results.push(r);
+    }
+    bar.finish_and_clear();
+
+    let rep = report::build_report(&results, args.threads, args.width, args.passes);
+    let md = report::markdown(&rep);
+    println!("{md}");
+    std::fs::write(args.out.join("report.md"), &md)?;
+    report::write_json(&args.out.join("results.json"), &rep)?;
+    if let Some(j) = &args.json {
+        report::write_json(j, &rep)?;
+    }
+    match report::ratio_chart(&args.out.join("ratio.png"), &rep) {
+        Ok(()) => eprintln!(
+            "wrote {}/report.md, results.json, ratio.png and one picture per scene",
+            args.out.display()
+        ),
+        Err(e) => eprintln!("chart skipped: {e:#}"),
+    }
+    if let Some(min) = args.min_agreement {
+        for s in &rep.scenes {
+            for c in &s.classes {
+                if c.hit_miss_agreement < min {
+                    bail!(
+                        "{} {}: hit/miss agreement {:.6} is below {min}",
+                        s.name,
+                        c.class,
+                        c.hit_miss_agreement
+                    );
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+fn dump(dir: &Path, spec: &scenes::SceneSpec, r: &harness::SceneResult) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir)?;
+    let offsets = rayfile::offsets(&spec.load()?);
+    for (class, rays, s, e) in &r.ray_sets {
+        let base = format!("{}_{}", r.name, class.name());
+        rayfile::write_rays(&dir.join(format!("{base}.rays")), rays)?;
+        rayfile::write_hits(&dir.join(format!("{base}.strahl.hits")), s, &offsets)?;
+        rayfile::write_hits(&dir.join(format!("{base}.embree.hits")), e, &offsets)?;
+    }
+    Ok(())
+}
+
+fn trace_file(
+    args: &Args,
+    rays_path: &Path,
+    pool: &rayon::ThreadPool,
+    device: &embree::Device,
+) -> anyhow::Result<()> {
+    let [scene_path] = args.scenes.as_slice() else {
+        bail!("--trace-rays needs exactly one scene (an OBJ file or folder)");
+    };
+    let spec = scenes::from_path(scene_path)?;
+    let meshes = spec.load()?;
+    let rays = rayfile::read_rays(rays_path)?;
+    let scene =
+        pool.install(|| strahl::Scene::build(meshes.clone(), &strahl::BuildConfig::default()))?;
+    let escene = embree::Scene::build(device, &meshes, embree::Quality::Medium, false)?;
+    let class = if args.occlusion {
+        Class::Shadow
+    } else {
+        Class::Diffuse
+    };
+    let (s, e) = harness::trace_once(&scene, &escene, &rays, class, pool);
+    let acc = compare::accuracy::compare(&meshes, &rays, args.occlusion, &s, &e);
+    std::fs::create_dir_all(&args.out)?;
+    let offsets = rayfile::offsets(&meshes);
+    let stem = rays_path
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "rays".into());
+    let sp = args.out.join(format!("{stem}.strahl.hits"));
+    let ep = args.out.join(format!("{stem}.embree.hits"));
+    rayfile::write_hits(&sp, &s, &offsets)?;
+    rayfile::write_hits(&ep, &e, &offsets)?;
+    let hits = |a: &Answers| (0..a.len()).filter(|&i| a.hit(i)).count();
+    println!(
+        "{} rays: strahl {} hits, Embree {} hits, hit/miss agreement {:.6}, primitive agreement {:.6}\nwrote {} and {}",
+        rays.len(),
+        hits(&s),
+        hits(&e),
+        acc.hit_miss_agreement,
+        acc.prim_agreement,
+        sp.display(),
+        ep.display()
+    );
+    Ok(())
+}
+
+fn write_sphereflake(p: &Path) -> anyhow::Result<()> {
+    use std::io::Write;
+    let scenes::Source::Sphereflake {
+        levels,
+        stacks,
+        slices,
+    } = scenes::sphereflake().source
+    else {
+        unreachable!("the sphereflake spec is procedural")
+    };
+    let m = strahl::procedural::sphereflake(levels, stacks, slices);
+    let mut f = std::io::BufWriter::new(
+        std::fs::File::create(p).with_context(|| format!("creating {}", p.display()))?,
+    );
+    writeln!(
+        f,
+        "# Haines' sphereflake, generated by strahl::procedural::sphereflake({levels}, {stacks}, {slices})"
+    )?;
+    for v in m.positions() {
+        writeln!(f, "v {} {} {}", v.x, v.y, v.z)?;
+    }
+    for t in m.indices() {
+        writeln!(f, "f {} {} {}", t[0] + 1, t[1] + 1, t[2] + 1)?;
+    }
+    f.flush()?;
+    eprintln!("wrote {} ({} triangles)", p.display(), m.triangle_count());
+    Ok(())
+}

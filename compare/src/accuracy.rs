@@ -1,0 +1,339 @@
+//! Diffing two engines' answers on the same rays, with every disagreement decided by a float64
+//! recomputation from the same f32 inputs (ACCURACY.md, "Metrics").
+
+use glam::Vec3;
+use serde::Serialize;
+use strahl::{Ray, RayStream, TriangleMesh};
+
+use crate::harness::Answers;
+
+/// Barycentric distance from an edge below which a disagreement counts as an edge or vertex tie:
+/// f32 Möller–Trumbore decides such rays by rounding, so either answer is legitimate.
+pub const EDGE_TOL: f64 = 1e-5;
+/// Relative distance between two candidate hits, or from a ray bound, below which they tie.
+pub const DEPTH_TOL: f64 = 1e-5;
+/// Occlusion disagreements decided by a float64 brute-force pass over all triangles, at most.
+const MAX_BRUTE_FORCE: usize = 64;
+
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct Disagreements {
+    /// The ray passes within rounding of a triangle edge or vertex.
+    pub edge_or_vertex_tie: usize,
+    /// Two surfaces at the same distance, or a hit at the ray's tnear/tfar bound.
+    pub depth_tie: usize,
+    /// The float64 reference says strahl is wrong.
+    pub strahl_error: usize,
+    /// The float64 reference says Embree is wrong.
+    pub embree_error: usize,
+    /// Not decided (occlusion disagreements beyond the brute-force budget).
+    pub undecided: usize,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct Case {
+    pub ray: usize,
+    pub kind: &'static str,
+    pub verdict: &'static str,
+    pub strahl: (f32, u32, u32),
+    pub embree: (f32, u32, u32),
+    /// Smallest barycentric coordinate of the deciding triangle in float64.
+    pub min_barycentric: f64,
+    pub t64: f64,
+}
+
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct Accuracy {
+    pub hit_miss_agreement: f64,
+    /// Among rays both engines hit: same geometry and primitive.
+    pub prim_agreement: f64,
+    /// Relative t difference among rays hitting the same primitive.
+    pub t_rel_median: f64,
+    pub t_rel_p999: f64,
+    pub t_rel_max: f64,
+    pub hit_miss_disagreements: usize,
+    pub prim_disagreements: usize,
+    pub classified: Disagreements,
+    pub worst: Vec<Case>,
+}
+
+/// Float64 Möller–Trumbore without range checks: `(t, [w, u, v])`, or `None` for a ray parallel
+/// to the plane.
+pub fn exact(ray: &Ray, tri: [Vec3; 3]) -> Option<(f64, [f64; 3])> {
+    let o = ray.origin.as_dvec3();
+    let d = ray.dir.as_dvec3();
+    let [a, b, c] = tri.map(|p| p.as_dvec3());
+    let e1 = b - a;
+    let e2 = c - a;
+    let p = d.cross(e2);
+    let det = e1.dot(p);
+    if det == 0.0 || !det.is_finite() {
+        return None;
+    }
+    let s = o - a;
+    let u = s.dot(p) / det;
+    let q = s.cross(e1);
+    let v = d.dot(q) / det;
+    let t = e2.dot(q) / det;
+    Some((t, [1.0 - u - v, u, v]))
+}
+
+fn min3(b: [f64; 3]) -> f64 {
+    b[0].min(b[1]).min(b[2])
+}
+
+/// Whether the float64 hit `(t, b)` is inside the triangle and the ray interval, with a margin:
+/// `Some(true)` clearly a hit, `Some(false)` clearly not, `None` within tolerance of a boundary.
+fn decide(ray: &Ray, h: Option<(f64, [f64; 3])>) -> (Option<bool>, &'static str) {
+    let Some((t, b)) = h else {
+        return (Some(false), "parallel");
+    };
+    let m = min3(b);
+    let (tn, tf) = (ray.tnear as f64, ray.tfar as f64);
+    let scale = t.abs().max(1e-30);
+    if m.abs() <= EDGE_TOL {
+        return (None, "edge_or_vertex");
+    }
+    if (t - tn).abs() <= DEPTH_TOL * scale
+        || (tf.is_finite() && (t - tf).abs() <= DEPTH_TOL * scale)
+    {
+        return (None, "depth");
+    }
+    (Some(m > 0.0 && t > tn && t <= tf), "clear")
+}
+
+struct Lookup<'a> {
+    meshes: &'a [TriangleMesh],
+}
+
+impl Lookup<'_> {
+    fn tri(&self, geom: u32, prim: u32) -> Option<[Vec3; 3]> {
+        let m = self.meshes.get(geom as usize)?;
+        ((prim as usize) < m.triangle_count()).then(|| m.triangle(prim as usize))
+    }
+}
+
+/// Compares strahl's answers `s` with Embree's `e` on `rays`.
+pub fn compare(
+    meshes: &[TriangleMesh],
+    rays: &RayStream,
+    occlusion: bool,
+    s: &Answers,
+    e: &Answers,
+) -> Accuracy {
+    let n = rays.len();
+    let look = Lookup { meshes };
+    let mut acc = Accuracy::default();
+    let mut rel = Vec::new();
+    let mut both = 0usize;
+    let mut same_prim = 0usize;
+    let mut cases: Vec<(u8, f64, Case)> = Vec::new();
+    let mut brute_left = MAX_BRUTE_FORCE;
+    for i in 0..n {
+        let (sh, eh) = (s.hit(i), e.hit(i));
+        let ray = rays.get(i);
+        let sa = (s.t[i], s.geom[i], s.prim[i]);
+        let ea = (e.t[i], e.geom[i], e.prim[i]);
+        if sh != eh {
+            acc.hit_miss_disagreements += 1;
+            // Decide by the triangle the hitting engine reported, or by brute force for occlusion.
+            let (verdict, minb, t64) = if occlusion {
+                if brute_left == 0 {
+                    ("undecided", f64::NAN, f64::NAN)
+                } else {
+                    brute_left -= 1;
+                    let (any_clear, any_tie, t64, mb) = brute_force_occlusion(meshes, &ray);
+                    if any_clear {
+                        (if sh { "embree_error" } else { "strahl_error" }, mb, t64)
+                    } else if let Some(kind) = any_tie {
+                        (kind, mb, t64)
+                    } else {
+                        (if sh { "strahl_error" } else { "embree_error" }, mb, t64)
+                    }
+                }
+            } else {
+                let (g, p) = if sh { (sa.1, sa.2) } else { (ea.1, ea.2) };
+                match look.tri(g, p).map(|t| exact(&ray, t)) {
+                    Some(h) => {
+                        let (clear, kind) = decide(&ray, h);
+                        let (t64, mb) =
+                            h.map(|(t, b)| (t, min3(b))).unwrap_or((f64::NAN, f64::NAN));
+                        match clear {
+                            None => (
+                                if kind == "depth" {
+                                    "depth_tie"
+                                } else {
+                                    "edge_or_vertex_tie"
+                                },
+                                mb,
+                                t64,
+                            ),
+                            // The reported hit is real: the engine that missed erred.
+                            Some(true) => {
+                                (if sh { "embree_error" } else { "strahl_error" }, mb, t64)
+                            }
+                            Some(false) => {
+                                (if sh { "strahl_error" } else { "embree_error" }, mb, t64)
+                            }
+                        }
+                    }
+                    None => (
+                        if sh { "strahl_error" } else { "embree_error" },
+                        f64::NAN,
+                        f64::NAN,
+                    ),
+                }
+            };
+            tally(&mut acc.classified, verdict);
+            let sev = if verdict.ends_with("error") { 0 } else { 1 };
+            cases.push((
+                sev,
+                -minb.abs(),
+                Case {
+                    ray: i,
+                    kind: "hit_miss",
+                    verdict,
+                    strahl: sa,
+                    embree: ea,
+                    min_barycentric: minb,
+                    t64,
+                },
+            ));
+            continue;
+        }
+        if !sh || occlusion {
+            continue;
+        }
+        both += 1;
+        if (sa.1, sa.2) == (ea.1, ea.2) {
+            same_prim += 1;
+            let r = ((sa.0 as f64 - ea.0 as f64) / (ea.0 as f64).abs().max(1e-30)).abs();
+            rel.push(r);
+            continue;
+        }
+        acc.prim_disagreements += 1;
+        let hs = look.tri(sa.1, sa.2).and_then(|t| exact(&ray, t));
+        let he = look.tri(ea.1, ea.2).and_then(|t| exact(&ray, t));
+        let (verdict, minb, t64) = match (hs, he) {
+            (Some((ts, bs)), Some((te, be))) => {
+                let scale = ts.abs().max(te.abs()).max(1e-30);
+                let mb = min3(bs).min(min3(be));
+                if min3(bs).abs() <= EDGE_TOL || min3(be).abs() <= EDGE_TOL {
+                    ("edge_or_vertex_tie", mb, ts.min(te))
+                } else if (ts - te).abs() <= DEPTH_TOL * scale {
+                    ("depth_tie", mb, ts.min(te))
+                } else if ts < te {
+                    // strahl's triangle is nearer; Embree's answer is wrong unless strahl's is not a hit.
+                    if min3(bs) > 0.0 {
+                        ("embree_error", mb, ts)
+                    } else {
+                        ("strahl_error", mb, te)
+                    }
+                } else if min3(be) > 0.0 {
+                    ("strahl_error", mb, te)
+                } else {
+                    ("embree_error", mb, ts)
+                }
+            }
+            _ => ("undecided", f64::NAN, f64::NAN),
+        };
+        tally(&mut acc.classified, verdict);
+        let sev = if verdict.ends_with("error") { 0 } else { 2 };
+        cases.push((
+            sev,
+            -minb.abs(),
+            Case {
+                ray: i,
+                kind: "primitive",
+                verdict,
+                strahl: sa,
+                embree: ea,
+                min_barycentric: minb,
+                t64,
+            },
+        ));
+    }
+    acc.hit_miss_agreement = if n == 0 {
+        1.0
+    } else {
+        1.0 - acc.hit_miss_disagreements as f64 / n as f64
+    };
+    acc.prim_agreement = if both == 0 {
+        1.0
+    } else {
+        same_prim as f64 / both as f64
+    };
+    rel.sort_by(f64::total_cmp);
+    if !rel.is_empty() {
+        let q = |f: f64| rel[((rel.len() - 1) as f64 * f).round() as usize];
+        acc.t_rel_median = q(0.5);
+        acc.t_rel_p999 = q(0.999);
+        acc.t_rel_max = *rel.last().expect("non-empty");
+    }
+    cases.sort_by(|a, b| a.0.cmp(&b.0).then(b.1.total_cmp(&a.1)));
+    acc.worst = cases.into_iter().take(5).map(|c| c.2).collect();
+    acc
+}
+
+fn tally(d: &mut Disagreements, verdict: &str) {
+    match verdict {
+        "edge_or_vertex_tie" | "edge_or_vertex" => d.edge_or_vertex_tie += 1,
+        "depth_tie" | "depth" => d.depth_tie += 1,
+        "strahl_error" => d.strahl_error += 1,
+        "embree_error" => d.embree_error += 1,
+        _ => d.undecided += 1,
+    }
+}
+
+/// Float64 occlusion of `ray` over every triangle: (some triangle clearly occludes, the kind of
+/// tie if some triangle is within tolerance, nearest t, its smallest barycentric).
+fn brute_force_occlusion(
+    meshes: &[TriangleMesh],
+    ray: &Ray,
+) -> (bool, Option<&'static str>, f64, f64) {
+    let mut tie = None;
+    let mut best = (f64::INFINITY, f64::NAN);
+    for m in meshes {
+        for i in 0..m.triangle_count() {
+            if !m.is_hittable(i) {
+                continue;
+            }
+            let h = exact(ray, m.triangle(i));
+            match decide(ray, h) {
+                (Some(true), _) => {
+                    let (t, b) = h.expect("decided hits exist");
+                    return (true, None, t, min3(b));
+                }
+                (None, kind) => {
+                    let (t, b) = h.expect("ties exist");
+                    if t > ray.tnear as f64 - DEPTH_TOL * t.abs() && t < best.0 {
+                        best = (t, min3(b));
+                        tie = Some(if kind == "depth" {
+                            "depth_tie"
+                        } else {
+                            "edge_or_vertex_tie"
+                        });
+                    }
+                }
+                _ => {}
+            }
+        }
+    }
+    (false, tie, best.0, best.1)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn exact_matches_the_definition() {
+        let tri = [Vec3::ZERO, Vec3::X, Vec3::Y];
+        let r = Ray::new(Vec3::new(0.25, 0.5, 2.0), Vec3::new(0.0, 0.0, -1.0));
+        let (t, b) = exact(&r, tri).unwrap();
+        assert!((t - 2.0).abs() < 1e-12);
+        assert!((b[1] - 0.25).abs() < 1e-12 && (b[2] - 0.5).abs() < 1e-12);
+        assert_eq!(decide(&r, Some((t, b))).0, Some(true));
+        let edge = Ray::new(Vec3::new(0.5, 0.0, 2.0), Vec3::new(0.0, 0.0, -1.0));
+        assert_eq!(decide(&edge, exact(&edge, tri)).0, None);
+    }
+}

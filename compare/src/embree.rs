@@ -1,0 +1,399 @@
+//! Bindings to the subset of Embree 3's C API the harness uses, and a safe wrapper around them.
+//!
+//! Layouts and constants are transcribed from Debian's `libembree-dev` 3.13.5 headers
+//! (`/usr/include/embree3/rtcore_*.h`, `RTC_MAX_INSTANCE_LEVEL_COUNT = 1`, `RTC_MIN_WIDTH = 0`) and
+//! checked by the size tests at the end. This is the only file of the harness with `unsafe` code.
+#![allow(unsafe_code, non_camel_case_types, non_snake_case, dead_code)]
+
+use std::ffi::{CString, c_char, c_uint, c_void};
+use std::time::Instant;
+
+use strahl::TriangleMesh;
+
+type RTCDevice = *mut c_void;
+type RTCScene = *mut c_void;
+type RTCGeometry = *mut c_void;
+
+pub const RTC_INVALID_GEOMETRY_ID: u32 = u32::MAX;
+const RTC_GEOMETRY_TYPE_TRIANGLE: c_uint = 0;
+const RTC_GEOMETRY_TYPE_INSTANCE: c_uint = 121;
+const RTC_BUFFER_TYPE_INDEX: c_uint = 0;
+const RTC_BUFFER_TYPE_VERTEX: c_uint = 1;
+const RTC_FORMAT_UINT3: c_uint = 0x5003;
+const RTC_FORMAT_FLOAT3: c_uint = 0x9003;
+const RTC_SCENE_FLAG_ROBUST: c_uint = 1 << 2;
+const RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT: c_uint = 0;
+const RTC_INTERSECT_CONTEXT_FLAG_COHERENT: c_uint = 1;
+
+#[repr(C, align(16))]
+#[derive(Clone, Copy, Default, Debug)]
+pub struct RTCRay {
+    pub org_x: f32,
+    pub org_y: f32,
+    pub org_z: f32,
+    pub tnear: f32,
+    pub dir_x: f32,
+    pub dir_y: f32,
+    pub dir_z: f32,
+    pub time: f32,
+    pub tfar: f32,
+    pub mask: u32,
+    pub id: u32,
+    pub flags: u32,
+}
+
+#[repr(C, align(16))]
+#[derive(Clone, Copy, Default, Debug)]
+pub struct RTCHit {
+    pub Ng_x: f32,
+    pub Ng_y: f32,
+    pub Ng_z: f32,
+    pub u: f32,
+    pub v: f32,
+    pub primID: u32,
+    pub geomID: u32,
+    pub instID: [u32; 1],
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Default, Debug)]
+pub struct RTCRayHit {
+    pub ray: RTCRay,
+    pub hit: RTCHit,
+}
+
+#[repr(C, align(64))]
+#[derive(Clone, Copy, Debug)]
+pub struct RTCRay16 {
+    pub org_x: [f32; 16],
+    pub org_y: [f32; 16],
+    pub org_z: [f32; 16],
+    pub tnear: [f32; 16],
+    pub dir_x: [f32; 16],
+    pub dir_y: [f32; 16],
+    pub dir_z: [f32; 16],
+    pub time: [f32; 16],
+    pub tfar: [f32; 16],
+    pub mask: [u32; 16],
+    pub id: [u32; 16],
+    pub flags: [u32; 16],
+}
+
+#[repr(C, align(64))]
+#[derive(Clone, Copy, Debug)]
+pub struct RTCHit16 {
+    pub Ng_x: [f32; 16],
+    pub Ng_y: [f32; 16],
+    pub Ng_z: [f32; 16],
+    pub u: [f32; 16],
+    pub v: [f32; 16],
+    pub primID: [u32; 16],
+    pub geomID: [u32; 16],
+    pub instID: [[u32; 16]; 1],
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct RTCRayHit16 {
+    pub ray: RTCRay16,
+    pub hit: RTCHit16,
+}
+
+/// `struct RTCIntersectContext` for `RTC_MAX_INSTANCE_LEVEL_COUNT == 1` and `RTC_MIN_WIDTH == 0`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+struct RTCIntersectContext {
+    flags: c_uint,
+    filter: Option<unsafe extern "C" fn(*const c_void)>,
+    instID: [c_uint; 1],
+}
+
+impl RTCIntersectContext {
+    /// `rtcInitIntersectContext`, an inline function of the header, reimplemented.
+    fn new(coherent: bool) -> Self {
+        Self {
+            flags: if coherent {
+                RTC_INTERSECT_CONTEXT_FLAG_COHERENT
+            } else {
+                RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT
+            },
+            filter: None,
+            instID: [RTC_INVALID_GEOMETRY_ID],
+        }
+    }
+}
+
+#[link(name = "embree3")]
+unsafe extern "C" {
+    fn rtcNewDevice(config: *const c_char) -> RTCDevice;
+    fn rtcReleaseDevice(device: RTCDevice);
+    fn rtcGetDeviceError(device: RTCDevice) -> c_uint;
+    fn rtcNewScene(device: RTCDevice) -> RTCScene;
+    fn rtcReleaseScene(scene: RTCScene);
+    fn rtcSetSceneBuildQuality(scene: RTCScene, quality: c_uint);
+    fn rtcSetSceneFlags(scene: RTCScene, flags: c_uint);
+    fn rtcCommitScene(scene: RTCScene);
+    fn rtcNewGeometry(device: RTCDevice, kind: c_uint) -> RTCGeometry;
+    fn rtcReleaseGeometry(geometry: RTCGeometry);
+    fn rtcCommitGeometry(geometry: RTCGeometry);
+    fn rtcAttachGeometryByID(scene: RTCScene, geometry: RTCGeometry, id: c_uint);
+    fn rtcSetNewGeometryBuffer(
+        geometry: RTCGeometry,
+        kind: c_uint,
+        slot: c_uint,
+        format: c_uint,
+        byte_stride: usize,
+        item_count: usize,
+    ) -> *mut c_void;
+    fn rtcIntersect1(scene: RTCScene, context: *mut RTCIntersectContext, rayhit: *mut RTCRayHit);
+    fn rtcOccluded1(scene: RTCScene, context: *mut RTCIntersectContext, ray: *mut RTCRay);
+    fn rtcIntersect16(
+        valid: *const i32,
+        scene: RTCScene,
+        context: *mut RTCIntersectContext,
+        rayhit: *mut RTCRayHit16,
+    );
+    fn rtcOccluded16(
+        valid: *const i32,
+        scene: RTCScene,
+        context: *mut RTCIntersectContext,
+        ray: *mut RTCRay16,
+    );
+    fn rtcIntersect1M(
+        scene: RTCScene,
+        context: *mut RTCIntersectContext,
+        rayhit: *mut RTCRayHit,
+        m: c_uint,
+        byte_stride: usize,
+    );
+    fn rtcOccluded1M(
+        scene: RTCScene,
+        context: *mut RTCIntersectContext,
+        ray: *mut RTCRay,
+        m: c_uint,
+        byte_stride: usize,
+    );
+}
+
+/// Embree's build quality levels.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Quality {
+    Low = 0,
+    Medium = 1,
+    High = 2,
+}
+
+/// An Embree device.
+pub struct Device {
+    raw: RTCDevice,
+}
+
+// SAFETY: Embree devices are documented as thread-safe; the handle is only used through Embree.
+unsafe impl Send for Device {}
+// SAFETY: as above; all Embree calls taking a device are thread-safe.
+unsafe impl Sync for Device {}
+
+impl Device {
+    /// A device with Embree's configuration string, e.g. `"threads=2"`.
+    pub fn new(config: &str) -> anyhow::Result<Self> {
+        let c = CString::new(config)?;
+        // SAFETY: `c` is a valid NUL-terminated string that outlives the call.
+        let raw = unsafe { rtcNewDevice(c.as_ptr()) };
+        if raw.is_null() {
+            anyhow::bail!("rtcNewDevice({config:?}) failed");
+        }
+        Ok(Self { raw })
+    }
+
+    fn check(&self, what: &str) -> anyhow::Result<()> {
+        // SAFETY: `self.raw` is a live device.
+        let e = unsafe { rtcGetDeviceError(self.raw) };
+        if e != 0 {
+            anyhow::bail!("Embree error {e} in {what}");
+        }
+        Ok(())
+    }
+}
+
+impl Drop for Device {
+    fn drop(&mut self) {
+        // SAFETY: the device was created by rtcNewDevice and is released once; scenes hold their
+        // own reference (Embree reference-counts devices).
+        unsafe { rtcReleaseDevice(self.raw) }
+    }
+}
+
+/// A committed Embree scene of triangle meshes, geometry ids equal to mesh indices.
+pub struct Scene {
+    raw: RTCScene,
+    /// Wall time of the commit (the BVH build).
+    pub build_ms: f64,
+}
+
+// SAFETY: a committed scene is immutable; Embree documents rtcIntersect*/rtcOccluded* on a committed
+// scene as safe to call from many threads at once.
+unsafe impl Send for Scene {}
+// SAFETY: as above.
+unsafe impl Sync for Scene {}
+
+impl Scene {
+    /// Builds `meshes` with the given quality; `robust` sets `RTC_SCENE_FLAG_ROBUST`.
+    pub fn build(
+        device: &Device,
+        meshes: &[TriangleMesh],
+        quality: Quality,
+        robust: bool,
+    ) -> anyhow::Result<Self> {
+        // SAFETY: `device.raw` is live; every pointer returned by rtcSetNewGeometryBuffer is checked
+        // for null and points to a buffer of exactly `item_count × byte_stride` bytes (plus Embree's
+        // own padding), which the copies below fill without overrunning.
+        unsafe {
+            let raw = rtcNewScene(device.raw);
+            if raw.is_null() {
+                device.check("rtcNewScene")?;
+                anyhow::bail!("rtcNewScene failed");
+            }
+            let mut scene = Self { raw, build_ms: 0.0 };
+            rtcSetSceneBuildQuality(raw, quality as c_uint);
+            if robust {
+                rtcSetSceneFlags(raw, RTC_SCENE_FLAG_ROBUST);
+            }
+            for (id, m) in meshes.iter().enumerate() {
+                if m.triangle_count() == 0 || m.positions().is_empty() {
+                    continue;
+                }
+                let g = rtcNewGeometry(device.raw, RTC_GEOMETRY_TYPE_TRIANGLE);
+                if g.is_null() {
+                    device.check("rtcNewGeometry")?;
+                    anyhow::bail!("rtcNewGeometry failed");
+                }
+                let nv = m.positions().len();
+                let vb = rtcSetNewGeometryBuffer(
+                    g,
+                    RTC_BUFFER_TYPE_VERTEX,
+                    0,
+                    RTC_FORMAT_FLOAT3,
+                    12,
+                    nv,
+                ) as *mut f32;
+                let nt = m.triangle_count();
+                let ib =
+                    rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 12, nt)
+                        as *mut u32;
+                if vb.is_null() || ib.is_null() {
+                    rtcReleaseGeometry(g);
+                    device.check("rtcSetNewGeometryBuffer")?;
+                    anyhow::bail!("rtcSetNewGeometryBuffer failed");
+                }
+                let vs = std::slice::from_raw_parts_mut(vb, 3 * nv);
+                for (i, p) in m.positions().iter().enumerate() {
+                    vs[3 * i..3 * i + 3].copy_from_slice(&p.to_array());
+                }
+                let is = std::slice::from_raw_parts_mut(ib, 3 * nt);
+                for (i, t) in m.indices().iter().enumerate() {
+                    is[3 * i..3 * i + 3].copy_from_slice(t);
+                }
+                rtcCommitGeometry(g);
+                rtcAttachGeometryByID(raw, g, id as c_uint);
+                rtcReleaseGeometry(g);
+            }
+            let start = Instant::now();
+            rtcCommitScene(raw);
+            scene.build_ms = start.elapsed().as_secs_f64() * 1e3;
+            device.check("rtcCommitScene")?;
+            Ok(scene)
+        }
+    }
+
+    /// `rtcIntersect1` on one ray/hit record.
+    #[inline]
+    pub fn intersect1(&self, rh: &mut RTCRayHit, coherent: bool) {
+        let mut ctx = RTCIntersectContext::new(coherent);
+        // SAFETY: the scene is committed; `ctx` and `rh` are valid, aligned, exclusive references.
+        unsafe { rtcIntersect1(self.raw, &mut ctx, rh) }
+    }
+
+    /// `rtcOccluded1`; afterwards `ray.tfar == -inf` marks an occluded ray.
+    #[inline]
+    pub fn occluded1(&self, ray: &mut RTCRay, coherent: bool) {
+        let mut ctx = RTCIntersectContext::new(coherent);
+        // SAFETY: as for intersect1.
+        unsafe { rtcOccluded1(self.raw, &mut ctx, ray) }
+    }
+
+    /// `rtcIntersect16` with a valid mask (−1 = active lane).
+    #[inline]
+    pub fn intersect16(&self, valid: &[i32; 16], rh: &mut RTCRayHit16, coherent: bool) {
+        let mut ctx = RTCIntersectContext::new(coherent);
+        // SAFETY: `valid` points to 16 ints and `rh` is a 64-byte-aligned RTCRayHit16, as required.
+        unsafe { rtcIntersect16(valid.as_ptr(), self.raw, &mut ctx, rh) }
+    }
+
+    /// `rtcOccluded16` with a valid mask.
+    #[inline]
+    pub fn occluded16(&self, valid: &[i32; 16], ray: &mut RTCRay16, coherent: bool) {
+        let mut ctx = RTCIntersectContext::new(coherent);
+        // SAFETY: as for intersect16.
+        unsafe { rtcOccluded16(valid.as_ptr(), self.raw, &mut ctx, ray) }
+    }
+
+    /// `rtcIntersect1M` over a slice of ray/hit records.
+    pub fn intersect1m(&self, rh: &mut [RTCRayHit], coherent: bool) {
+        if rh.is_empty() {
+            return;
+        }
+        let mut ctx = RTCIntersectContext::new(coherent);
+        // SAFETY: the slice holds `len` contiguous, aligned records with the given stride.
+        unsafe {
+            rtcIntersect1M(
+                self.raw,
+                &mut ctx,
+                rh.as_mut_ptr(),
+                rh.len() as c_uint,
+                size_of::<RTCRayHit>(),
+            )
+        }
+    }
+
+    /// `rtcOccluded1M` over a slice of rays.
+    pub fn occluded1m(&self, rays: &mut [RTCRay], coherent: bool) {
+        if rays.is_empty() {
+            return;
+        }
+        let mut ctx = RTCIntersectContext::new(coherent);
+        // SAFETY: as for intersect1m.
+        unsafe {
+            rtcOccluded1M(
+                self.raw,
+                &mut ctx,
+                rays.as_mut_ptr(),
+                rays.len() as c_uint,
+                size_of::<RTCRay>(),
+            )
+        }
+    }
+}
+
+impl Drop for Scene {
+    fn drop(&mut self) {
+        // SAFETY: the scene was created by rtcNewScene and is released once.
+        unsafe { rtcReleaseScene(self.raw) }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn layouts_match_the_headers() {
+        assert_eq!(size_of::<RTCRay>(), 48);
+        assert_eq!(size_of::<RTCHit>(), 32);
+        assert_eq!(size_of::<RTCRayHit>(), 80);
+        assert_eq!(size_of::<RTCRay16>(), 12 * 64);
+        assert_eq!(size_of::<RTCHit16>(), 8 * 64);
+        assert_eq!(size_of::<RTCRayHit16>(), 20 * 64);
+        assert_eq!(align_of::<RTCRayHit16>(), 64);
+        assert_eq!(size_of::<RTCIntersectContext>(), 24);
+    }
+}

@@ -1,0 +1,434 @@
+//! Results out: the terminal table, a Markdown report, the JSON file, the ratio chart and one shaded
+//! picture per scene.
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use anyhow::Context;
+use serde::Serialize;
+
+use crate::accuracy::{Case, Disagreements};
+use crate::harness::{Api, BuildResult, ClassResult, SceneResult};
+
+#[derive(Serialize)]
+pub struct Report {
+    pub threads: usize,
+    pub date: String,
+    pub machine: String,
+    pub strahl_commit: String,
+    pub width: u32,
+    pub passes: usize,
+    pub scenes: Vec<SceneJson>,
+    /// Geometric mean over scenes × classes of the best-vs-best ratio.
+    pub geomean_best_ratio: f64,
+}
+
+#[derive(Serialize)]
+pub struct SceneJson {
+    pub name: String,
+    pub triangles: usize,
+    pub build: BuildResult,
+    pub build_ratio: f64,
+    pub classes: Vec<ClassJson>,
+}
+
+#[derive(Serialize)]
+pub struct Engines {
+    pub strahl: Apis,
+    pub embree: Apis,
+}
+
+#[derive(Serialize)]
+pub struct Apis {
+    pub single: f64,
+    pub packet: f64,
+    pub stream: f64,
+}
+
+#[derive(Serialize)]
+pub struct ClassJson {
+    pub class: &'static str,
+    pub rays: usize,
+    pub hit_rate: f64,
+    pub hit_miss_agreement: f64,
+    pub prim_agreement: f64,
+    pub t_rel_median: f64,
+    pub t_rel_p999: f64,
+    pub t_rel_max: f64,
+    pub disagreements: Disagreements,
+    pub worst: Vec<Case>,
+    pub mrays: Engines,
+    pub mrays_median: Engines,
+    pub ratio: Apis,
+    pub best_ratio: f64,
+    pub best_api: (&'static str, &'static str),
+    pub strahl_apis_consistent: f64,
+    pub embree_apis_consistent: f64,
+}
+
+fn apis(c: &ClassResult, engine: usize, median: bool) -> Apis {
+    Apis {
+        single: c.mrays(engine, Api::Single, median),
+        packet: c.mrays(engine, Api::Packet, median),
+        stream: c.mrays(engine, Api::Stream, median),
+    }
+}
+
+fn ratio(a: f64, b: f64) -> f64 {
+    if b > 0.0 { a / b } else { 0.0 }
+}
+
+pub fn build_report(results: &[SceneResult], threads: usize, width: u32, passes: usize) -> Report {
+    let mut logs = Vec::new();
+    let scenes = results
+        .iter()
+        .map(|r| SceneJson {
+            name: r.name.clone(),
+            triangles: r.triangles,
+            build: r.build.clone(),
+            build_ratio: ratio(r.build.strahl_ms, r.build.embree_ms),
+            classes: r
+                .classes
+                .iter()
+                .map(|c| {
+                    let br = c.best_ratio();
+                    if br > 0.0 {
+                        logs.push(br.ln());
+                    }
+                    ClassJson {
+                        class: c.class.name(),
+                        rays: c.rays,
+                        hit_rate: c.hit_rate,
+                        hit_miss_agreement: c.accuracy.hit_miss_agreement,
+                        prim_agreement: c.accuracy.prim_agreement,
+                        t_rel_median: c.accuracy.t_rel_median,
+                        t_rel_p999: c.accuracy.t_rel_p999,
+                        t_rel_max: c.accuracy.t_rel_max,
+                        disagreements: c.accuracy.classified.clone(),
+                        worst: c.accuracy.worst.clone(),
+                        mrays: Engines {
+                            strahl: apis(c, 0, false),
+                            embree: apis(c, 1, false),
+                        },
+                        mrays_median: Engines {
+                            strahl: apis(c, 0, true),
+                            embree: apis(c, 1, true),
+                        },
+                        ratio: Apis {
+                            single: ratio(
+                                c.mrays(0, Api::Single, false),
+                                c.mrays(1, Api::Single, false),
+                            ),
+                            packet: ratio(
+                                c.mrays(0, Api::Packet, false),
+                                c.mrays(1, Api::Packet, false),
+                            ),
+                            stream: ratio(
+                                c.mrays(0, Api::Stream, false),
+                                c.mrays(1, Api::Stream, false),
+                            ),
+                        },
+                        best_ratio: br,
+                        best_api: (c.best(0).0.name(), c.best(1).0.name()),
+                        strahl_apis_consistent: c.strahl_apis_consistent,
+                        embree_apis_consistent: c.embree_apis_consistent,
+                    }
+                })
+                .collect(),
+        })
+        .collect();
+    let geomean = if logs.is_empty() {
+        0.0
+    } else {
+        (logs.iter().sum::<f64>() / logs.len() as f64).exp()
+    };
+    Report {
+        threads,
+        date: today(),
+        machine: machine(),
+        strahl_commit: commit(),
+        width,
+        passes,
+        scenes,
+        geomean_best_ratio: geomean,
+    }
+}
+
+fn today() -> String {
+    std::process::Command::new("date")
+        .arg("-u")
+        .arg("+%Y-%m-%d %H:%M UTC")
+        .output()
+        .ok()
+        .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
+        .unwrap_or_default()
+}
+
+fn machine() -> String {
+    let cpu = std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("model name"))
+                .map(|l| l.split(':').nth(1).unwrap_or("").trim().to_string())
+        })
+        .unwrap_or_else(|| "unknown CPU".into());
+    let cores = std::thread::available_parallelism()
+        .map(|n| n.get())
+        .unwrap_or(0);
+    format!("{cpu}, {cores} cores visible")
+}
+
+fn commit() -> String {
+    std::process::Command::new("git")
+        .args(["rev-parse", "--short", "HEAD"])
+        .output()
+        .ok()
+        .filter(|o| o.status.success())
+        .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
+        .unwrap_or_default()
+}
+
+fn pct(x: f64) -> String {
+    format!("{:.4}%", x * 100.0)
+}
+
+/// The results as a Markdown document (also what the terminal shows).
+pub fn markdown(r: &Report) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "# strahl vs Embree 3.13.5\n");
+    let _ = writeln!(
+        s,
+        "{} · {} · {} threads for both engines · {}×{} primary rays · best of {} passes · strahl {}\n",
+        r.date, r.machine, r.threads, r.width, r.width, r.passes, r.strahl_commit
+    );
+    let _ = writeln!(
+        s,
+        "Geometric mean of best-vs-best ratios (strahl/Embree): **{:.2}×**\n",
+        r.geomean_best_ratio
+    );
+    let _ = writeln!(s, "## Throughput (Mrays/s, best pass) and accuracy\n");
+    let _ = writeln!(
+        s,
+        "| scene | class | rays | hit rate | hit/miss agree | prim agree | t rel p99.9 | strahl single / packet / stream | Embree single / packet / stream | best ratio |"
+    );
+    let _ = writeln!(s, "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|");
+    for sc in &r.scenes {
+        for c in &sc.classes {
+            let m = &c.mrays;
+            let _ = writeln!(
+                s,
+                "| {} | {} | {} | {:.1}% | {} | {} | {:.1e} | {:.1} / {:.1} / {:.1} | {:.1} / {:.1} / {:.1} | **{:.2}×** ({} vs {}) |",
+                sc.name,
+                c.class,
+                c.rays,
+                c.hit_rate * 100.0,
+                pct(c.hit_miss_agreement),
+                pct(c.prim_agreement),
+                c.t_rel_p999,
+                m.strahl.single,
+                m.strahl.packet,
+                m.strahl.stream,
+                m.embree.single,
+                m.embree.packet,
+                m.embree.stream,
+                c.best_ratio,
+                c.best_api.0,
+                c.best_api.1,
+            );
+        }
+    }
+    let _ = writeln!(s, "\n## Build (2 threads, best of repeats)\n");
+    let _ = writeln!(
+        s,
+        "| scene | triangles | strahl ms | Embree MEDIUM ms | ratio | Embree HIGH ms | strahl SAH | strahl B/tri | nodes | leaves | depth |"
+    );
+    let _ = writeln!(s, "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+    for sc in &r.scenes {
+        let b = &sc.build;
+        let _ = writeln!(
+            s,
+            "| {} | {} | {:.1} | {:.1} | {:.2}× | {:.1} | {:.1} | {:.1} | {} | {} | {} |",
+            sc.name,
+            sc.triangles,
+            b.strahl_ms,
+            b.embree_ms,
+            sc.build_ratio,
+            b.embree_high_ms,
+            b.strahl_sah,
+            b.strahl_bytes_per_tri,
+            b.strahl_inner_nodes,
+            b.strahl_leaves,
+            b.strahl_depth
+        );
+    }
+    let _ = writeln!(s, "\n## Disagreements, decided in float64\n");
+    let _ = writeln!(
+        s,
+        "| scene | class | edge/vertex tie | depth tie | strahl error | Embree error | undecided | APIs consistent (strahl / Embree) |"
+    );
+    let _ = writeln!(s, "|---|---|---:|---:|---:|---:|---:|---:|");
+    for sc in &r.scenes {
+        for c in &sc.classes {
+            let d = &c.disagreements;
+            let _ = writeln!(
+                s,
+                "| {} | {} | {} | {} | {} | {} | {} | {} / {} |",
+                sc.name,
+                c.class,
+                d.edge_or_vertex_tie,
+                d.depth_tie,
+                d.strahl_error,
+                d.embree_error,
+                d.undecided,
+                pct(c.strahl_apis_consistent),
+                pct(c.embree_apis_consistent)
+            );
+        }
+    }
+    let worst: Vec<(&str, &str, &Case)> = r
+        .scenes
+        .iter()
+        .flat_map(|sc| {
+            sc.classes
+                .iter()
+                .flat_map(move |c| c.worst.iter().map(move |w| (sc.name.as_str(), c.class, w)))
+        })
+        .collect();
+    if !worst.is_empty() {
+        let _ = writeln!(s, "\nWorst cases (up to 5 per scene and class):\n");
+        let _ = writeln!(
+            s,
+            "| scene | class | ray | kind | verdict | strahl (t, geom, prim) | Embree (t, geom, prim) | min barycentric (f64) |"
+        );
+        let _ = writeln!(s, "|---|---|---:|---|---|---|---|---:|");
+        for (sc, cl, w) in worst {
+            let _ = writeln!(
+                s,
+                "| {sc} | {cl} | {} | {} | {} | {:?} | {:?} | {:.2e} |",
+                w.ray, w.kind, w.verdict, w.strahl, w.embree, w.min_barycentric
+            );
+        }
+    }
+    s
+}
+
+pub fn write_json(path: &Path, r: &Report) -> anyhow::Result<()> {
+    if let Some(d) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(d)?;
+    }
+    let text = serde_json::to_string_pretty(r)?;
+    std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
+}
+
+pub fn write_image(path: &Path, rgb: &[u8], w: u32) -> anyhow::Result<()> {
+    image::save_buffer(path, rgb, w, w, image::ExtendedColorType::Rgb8)
+        .with_context(|| format!("writing {}", path.display()))
+}
+
+/// A font for chart labels: DejaVu Sans from Debian's fonts-dejavu-core (installed by `.ci/setup`).
+fn load_font() -> Option<&'static [u8]> {
+    for p in [
+        "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
+        "/usr/share/fonts/TTF/DejaVuSans.ttf",
+        "/usr/share/fonts/dejavu/DejaVuSans.ttf",
+    ] {
+        if let Ok(b) = std::fs::read(p) {
+            return Some(Box::leak(b.into_boxed_slice()));
+        }
+    }
+    None
+}
+
+/// Registers the chart font once; false if none is installed.
+pub fn ensure_font() -> bool {
+    use std::sync::OnceLock;
+    static OK: OnceLock<bool> = OnceLock::new();
+    *OK.get_or_init(|| match load_font() {
+        Some(b) => {
+            plotters::style::register_font("sans-serif", plotters::style::FontStyle::Normal, b)
+                .is_ok()
+        }
+        None => false,
+    })
+}
+
+/// Grouped bars of the best-vs-best ratio per scene and ray class, with the parity line.
+pub fn ratio_chart(path: &Path, r: &Report) -> anyhow::Result<()> {
+    use plotters::prelude::*;
+    if !ensure_font() {
+        anyhow::bail!("no DejaVu font found for chart labels (apt-get install fonts-dejavu-core)");
+    }
+    let names: Vec<&str> = r.scenes.iter().map(|s| s.name.as_str()).collect();
+    let classes = ["primary", "shadow", "diffuse"];
+    let colors = [
+        RGBColor(66, 133, 244),
+        RGBColor(52, 168, 83),
+        RGBColor(234, 67, 53),
+    ];
+    let ymax = r
+        .scenes
+        .iter()
+        .flat_map(|s| s.classes.iter().map(|c| c.best_ratio))
+        .fold(1.2f64, f64::max)
+        * 1.15;
+    let root = BitMapBackend::new(path, (1200, 600)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let n = names.len().max(1);
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            format!(
+                "strahl / Embree throughput, best API vs best API ({} threads)",
+                r.threads
+            ),
+            ("sans-serif", 24),
+        )
+        .margin(20)
+        .x_label_area_size(60)
+        .y_label_area_size(60)
+        .build_cartesian_2d(0f64..n as f64, 0f64..ymax)?;
+    chart
+        .configure_mesh()
+        .disable_x_mesh()
+        .x_labels(n)
+        .x_label_formatter(&|x| {
+            let i = (x - 0.5).round() as usize;
+            names.get(i).map(|s| s.to_string()).unwrap_or_default()
+        })
+        .y_desc("ratio (higher is faster than Embree)")
+        .label_style(("sans-serif", 15))
+        .draw()?;
+    for (k, cl) in classes.iter().enumerate() {
+        let bars: Vec<(f64, f64)> = r
+            .scenes
+            .iter()
+            .enumerate()
+            .filter_map(|(i, s)| {
+                s.classes
+                    .iter()
+                    .find(|c| c.class == *cl)
+                    .map(|c| (i as f64, c.best_ratio))
+            })
+            .collect();
+        let color = colors[k];
+        chart
+            .draw_series(bars.iter().map(|&(x, y)| {
+                let x0 = x + 0.12 + 0.25 * k as f64;
+                Rectangle::new([(x0, 0.0), (x0 + 0.24, y)], color.filled())
+            }))?
+            .label(*cl)
+            .legend(move |(x, y)| Rectangle::new([(x, y - 6), (x + 12, y + 6)], color.filled()));
+    }
+    chart.draw_series(LineSeries::new(
+        vec![(0.0, 1.0), (n as f64, 1.0)],
+        BLACK.stroke_width(2),
+    ))?;
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 15))
+        .draw()?;
+    root.present()?;
+    Ok(())
+}
