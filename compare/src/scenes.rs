@@ -121,7 +121,7 @@ pub fn sphereflake() -> SceneSpec {
             stacks: 12,
             slices: 24,
         },
-        view: Some((Vec3::new(0.0, 1.6, 4.6), Vec3::new(0.0, 0.2, 0.0))),
+        view: Some((Vec3::new(0.0, 1.3, 3.4), Vec3::new(0.0, 0.25, 0.0))),
         light: Some(Vec3::new(3.0, 6.0, 4.0)),
     }
 }
