@@ -9,8 +9,8 @@ use std::path::Path;
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use glam::Vec3;
 use strahl::{
-    BuildConfig, Camera, Coherence, HitPacket, HitStream, PACKET_WIDTH, RayStream, Scene,
-    TriangleMesh, procedural, raygen,
+    BuildConfig, Camera, Coherence, HitPacket, HitStream, PACKET_WIDTH, RayStream, Scene, TriangleMesh, procedural,
+    raygen,
 };
 
 struct Case {
@@ -31,29 +31,11 @@ fn cases() -> Vec<Case> {
     }];
     let shared = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/scenes");
     for (name, file, eye, at, light) in [
-        (
-            "bunny",
-            "bunny/bunny.obj",
-            [-0.017, 0.13, 0.17],
-            [-0.017, 0.10, 0.0],
-            [0.1, 0.3, 0.2],
-        ),
-        (
-            "sponza",
-            "sponza_dabrovic/sponza.obj",
-            [-10.0, 3.0, 0.0],
-            [10.0, 4.0, 0.0],
-            [0.0, 12.0, 0.0],
-        ),
+        ("bunny", "bunny/bunny.obj", [-0.017, 0.13, 0.17], [-0.017, 0.10, 0.0], [0.1, 0.3, 0.2]),
+        ("sponza", "sponza_dabrovic/sponza.obj", [-10.0, 3.0, 0.0], [10.0, 4.0, 0.0], [0.0, 12.0, 0.0]),
     ] {
         if let Ok(meshes) = strahl::load_obj(shared.join(file)) {
-            v.push(Case {
-                name,
-                meshes,
-                eye: eye.into(),
-                at: at.into(),
-                light: light.into(),
-            });
+            v.push(Case { name, meshes, eye: eye.into(), at: at.into(), light: light.into() });
         }
     }
     v
@@ -65,55 +47,32 @@ fn bench_build(c: &mut Criterion) {
     for case in cases() {
         let tris: usize = case.meshes.iter().map(|m| m.triangle_count()).sum();
         g.throughput(Throughput::Elements(tris as u64));
-        g.bench_function(case.name, |b| {
-            b.iter(|| Scene::build(case.meshes.clone(), &BuildConfig::default()).unwrap())
-        });
+        g.bench_function(case.name, |b| b.iter(|| Scene::build(case.meshes.clone(), &BuildConfig::default()).unwrap()));
     }
     g.finish();
 }
 
-fn trace_all(
-    scene: &Scene,
-    rays: &RayStream,
-    occlusion: bool,
-    api: &str,
-    coherence: Coherence,
-) -> usize {
+fn trace_all(scene: &Scene, rays: &RayStream, occlusion: bool, api: &str, coherence: Coherence) -> usize {
     match (api, occlusion) {
-        ("single", false) => (0..rays.len())
-            .filter(|&i| scene.intersect(&rays.get(i)).is_some())
-            .count(),
-        ("single", true) => (0..rays.len())
-            .filter(|&i| scene.occluded(&rays.get(i)))
-            .count(),
+        ("single", false) => (0..rays.len()).filter(|&i| scene.intersect(&rays.get(i)).is_some()).count(),
+        ("single", true) => (0..rays.len()).filter(|&i| scene.occluded(&rays.get(i))).count(),
         ("packet", false) => {
             let mut hp = HitPacket::default();
             let mut n = 0;
             for k in (0..rays.len()).step_by(PACKET_WIDTH) {
                 scene.intersect_packet(&rays.packet(k, PACKET_WIDTH), &mut hp);
-                n += hp
-                    .prim_id
-                    .iter()
-                    .filter(|&&p| p != strahl::INVALID_ID)
-                    .count();
+                n += hp.prim_id.iter().filter(|&&p| p != strahl::INVALID_ID).count();
             }
             n
         }
         ("packet", true) => (0..rays.len())
             .step_by(PACKET_WIDTH)
-            .map(|k| {
-                scene
-                    .occluded_packet(&rays.packet(k, PACKET_WIDTH))
-                    .count_ones() as usize
-            })
+            .map(|k| scene.occluded_packet(&rays.packet(k, PACKET_WIDTH)).count_ones() as usize)
             .sum(),
         (_, false) => {
             let mut h = HitStream::default();
             scene.intersect_stream(rays, &mut h, coherence);
-            h.prim_id
-                .iter()
-                .filter(|&&p| p != strahl::INVALID_ID)
-                .count()
+            h.prim_id.iter().filter(|&&p| p != strahl::INVALID_ID).count()
         }
         (_, true) => {
             let mut o = Vec::new();
@@ -130,11 +89,7 @@ fn bench_rays(c: &mut Criterion) {
         let (primary, _) = raygen::primary(&cam, 256, 256);
         let mut hits = HitStream::default();
         scene.intersect_stream(&primary, &mut hits, Coherence::Coherent);
-        let eps = 1e-4
-            * scene
-                .bounds()
-                .map(|(lo, hi)| (hi - lo).length())
-                .unwrap_or(1.0);
+        let eps = 1e-4 * scene.bounds().map(|(lo, hi)| (hi - lo).length()).unwrap_or(1.0);
         let (shadow, _) = raygen::shadow(&primary, &hits, case.light, eps);
         let (diffuse, _) = raygen::diffuse(&primary, &hits, 1, eps);
         let mut g = c.benchmark_group(format!("rays/{}", case.name));

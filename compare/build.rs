@@ -14,9 +14,9 @@ fn main() {
     if let Ok(d) = std::env::var("EMBREE_LIB_DIR") {
         dirs.insert(0, d);
     }
-    let found = dirs.iter().find(|d| {
-        Path::new(d).join("libembree3.so").exists() || Path::new(d).join("libembree3.so.3").exists()
-    });
+    let found = dirs
+        .iter()
+        .find(|d| Path::new(d).join("libembree3.so").exists() || Path::new(d).join("libembree3.so.3").exists());
     match found {
         Some(d) => {
             println!("cargo:rustc-link-search=native={d}");

@@ -24,13 +24,7 @@ impl Camera {
         let forward = (at - eye).normalize();
         let right = forward.cross(up).normalize();
         let up = right.cross(forward);
-        Self {
-            eye,
-            forward,
-            right,
-            up,
-            tan_half_fov: (fov_deg.to_radians() * 0.5).tan(),
-        }
+        Self { eye, forward, right, up, tan_half_fov: (fov_deg.to_radians() * 0.5).tan() }
     }
 
     /// The ray through the centre of pixel `(px, py)` of a `w × h` image: direction

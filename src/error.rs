@@ -21,14 +21,8 @@ pub enum Error {
     RaggedPositions { len: usize },
     #[error("index buffer of length {len} is not a whole number of triangles")]
     RaggedIndices { len: usize },
-    #[error(
-        "triangle {triangle} refers to vertex {index}, but the mesh has {vertex_count} vertices"
-    )]
-    IndexOutOfRange {
-        triangle: usize,
-        index: u32,
-        vertex_count: usize,
-    },
+    #[error("triangle {triangle} refers to vertex {index}, but the mesh has {vertex_count} vertices")]
+    IndexOutOfRange { triangle: usize, index: u32, vertex_count: usize },
     #[error("mesh has {0} triangles; at most 2^32 - 1 are supported")]
     TooManyTriangles(usize),
     #[error("scene has {0} geometries; at most 2^32 - 1 are supported")]

@@ -24,11 +24,7 @@ pub fn append_uv_sphere(
         let theta = std::f32::consts::PI * i as f32 / stacks as f32;
         for j in 0..slices {
             let phi = 2.0 * std::f32::consts::PI * j as f32 / slices as f32;
-            let d = Vec3::new(
-                theta.sin() * phi.cos(),
-                theta.cos(),
-                theta.sin() * phi.sin(),
-            );
+            let d = Vec3::new(theta.sin() * phi.cos(), theta.cos(), theta.sin() * phi.sin());
             positions.push(center + d * radius);
         }
     }
@@ -41,12 +37,7 @@ pub fn append_uv_sphere(
     }
     for i in 1..stacks - 1 {
         for j in 0..slices {
-            let (a, b, c, d) = (
-                ring(i, j),
-                ring(i, j + 1),
-                ring(i + 1, j),
-                ring(i + 1, j + 1),
-            );
+            let (a, b, c, d) = (ring(i, j), ring(i, j + 1), ring(i + 1, j), ring(i + 1, j + 1));
             indices.push([a, b, d]);
             indices.push([a, d, c]);
         }
@@ -82,19 +73,8 @@ pub fn sphereflake(levels: u32, stacks: u32, slices: u32) -> TriangleMesh {
         let (t, b) = axis.any_orthonormal_pair();
         let child_r = r / 3.0;
         let mut place = |elevation: f32, azimuth: f32| {
-            let d = (axis * elevation.sin()
-                + (t * azimuth.cos() + b * azimuth.sin()) * elevation.cos())
-            .normalize();
-            grow(
-                p,
-                idx,
-                c + d * (r + child_r),
-                child_r,
-                d,
-                level - 1,
-                stacks,
-                slices,
-            );
+            let d = (axis * elevation.sin() + (t * azimuth.cos() + b * azimuth.sin()) * elevation.cos()).normalize();
+            grow(p, idx, c + d * (r + child_r), child_r, d, level - 1, stacks, slices);
         };
         let deg = std::f32::consts::PI / 180.0;
         for k in 0..6 {
@@ -104,16 +84,7 @@ pub fn sphereflake(levels: u32, stacks: u32, slices: u32) -> TriangleMesh {
             place(60.0 * deg, (30 + 120 * k) as f32 * deg);
         }
     }
-    grow(
-        &mut p,
-        &mut idx,
-        Vec3::ZERO,
-        1.0,
-        Vec3::Y,
-        levels,
-        stacks,
-        slices,
-    );
+    grow(&mut p, &mut idx, Vec3::ZERO, 1.0, Vec3::Y, levels, stacks, slices);
     TriangleMesh::new("sphereflake", p, idx).expect("indices are generated in range")
 }
 

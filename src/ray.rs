@@ -23,22 +23,12 @@ pub struct Ray {
 impl Ray {
     /// A ray over `(0, +inf]`.
     pub fn new(origin: Vec3, dir: Vec3) -> Self {
-        Self {
-            origin,
-            dir,
-            tnear: 0.0,
-            tfar: f32::INFINITY,
-        }
+        Self { origin, dir, tnear: 0.0, tfar: f32::INFINITY }
     }
 
     /// A ray over `(tnear, tfar]`.
     pub fn segment(origin: Vec3, dir: Vec3, tnear: f32, tfar: f32) -> Self {
-        Self {
-            origin,
-            dir,
-            tnear,
-            tfar,
-        }
+        Self { origin, dir, tnear, tfar }
     }
 
     /// The point at parameter `t`.
@@ -232,16 +222,7 @@ impl RayStream {
     /// An empty stream with room for `n` rays.
     pub fn with_capacity(n: usize) -> Self {
         let v = || Vec::with_capacity(n);
-        Self {
-            ox: v(),
-            oy: v(),
-            oz: v(),
-            dx: v(),
-            dy: v(),
-            dz: v(),
-            tnear: v(),
-            tfar: v(),
-        }
+        Self { ox: v(), oy: v(), oz: v(), dx: v(), dy: v(), dz: v(), tnear: v(), tfar: v() }
     }
 
     /// Number of rays. The component vectors are expected to have equal lengths; if they do not,
@@ -420,9 +401,7 @@ mod tests {
 
     #[test]
     fn packet_round_trip() {
-        let rays: Vec<Ray> = (0..5)
-            .map(|i| Ray::new(Vec3::splat(i as f32), Vec3::new(1.0, i as f32, 2.0)))
-            .collect();
+        let rays: Vec<Ray> = (0..5).map(|i| Ray::new(Vec3::splat(i as f32), Vec3::new(1.0, i as f32, 2.0))).collect();
         let p = RayPacket::from_rays(&rays);
         assert_eq!(p.active, 0b11111);
         for (i, r) in rays.iter().enumerate() {

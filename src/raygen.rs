@@ -16,26 +16,16 @@ pub fn primary(camera: &Camera, w: u32, h: u32) -> (RayStream, Vec<u32>) {
 }
 
 /// The hit point `o + t·d` of every ray of `rays` that hit, with its index in the stream.
-fn hit_points<'a>(
-    rays: &'a RayStream,
-    hits: &'a HitStream,
-) -> impl Iterator<Item = (usize, Vec3, Ray)> + 'a {
-    (0..rays.len().min(hits.len()))
-        .filter(move |&i| hits.get(i).is_some())
-        .map(move |i| {
-            let r = rays.get(i);
-            (i, r.at(hits.t[i]), r)
-        })
+fn hit_points<'a>(rays: &'a RayStream, hits: &'a HitStream) -> impl Iterator<Item = (usize, Vec3, Ray)> + 'a {
+    (0..rays.len().min(hits.len())).filter(move |&i| hits.get(i).is_some()).map(move |i| {
+        let r = rays.get(i);
+        (i, r.at(hits.t[i]), r)
+    })
 }
 
 /// A shadow ray from every hit towards `light`: direction `light − p` (not normalized),
 /// `tnear = epsilon`, `tfar = 0.9999`. Returns the rays and the index of the primary ray of each.
-pub fn shadow(
-    rays: &RayStream,
-    hits: &HitStream,
-    light: Vec3,
-    epsilon: f32,
-) -> (RayStream, Vec<u32>) {
+pub fn shadow(rays: &RayStream, hits: &HitStream, light: Vec3, epsilon: f32) -> (RayStream, Vec<u32>) {
     let mut out = RayStream::default();
     let mut src = Vec::new();
     for (i, p, _) in hit_points(rays, hits) {
@@ -48,12 +38,7 @@ pub fn shadow(
 /// A diffuse ray from every hit: cosine-distributed about the geometric normal turned to face the
 /// incoming ray, `tnear = epsilon`, `tfar = +inf`. The random numbers of ray `i` depend only on
 /// `seed` and `i`.
-pub fn diffuse(
-    rays: &RayStream,
-    hits: &HitStream,
-    seed: u64,
-    epsilon: f32,
-) -> (RayStream, Vec<u32>) {
+pub fn diffuse(rays: &RayStream, hits: &HitStream, seed: u64, epsilon: f32) -> (RayStream, Vec<u32>) {
     let mut out = RayStream::default();
     let mut src = Vec::new();
     for (i, p, r) in hit_points(rays, hits) {
@@ -94,10 +79,7 @@ pub struct Pcg32 {
 impl Pcg32 {
     /// A generator for stream `stream` of seed `seed`.
     pub fn new(seed: u64, stream: u64) -> Self {
-        let mut g = Self {
-            state: 0,
-            inc: (stream << 1) | 1,
-        };
+        let mut g = Self { state: 0, inc: (stream << 1) | 1 };
         g.next_u32();
         g.state = g.state.wrapping_add(seed);
         g.next_u32();

@@ -69,9 +69,7 @@ impl Scene {
     /// The closest hit of `ray` in `(tnear, tfar]`, or `None`. Invalid rays (see
     /// [`Ray::is_valid`]) miss.
     pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
-        self.bvh
-            .trace1::<false>(ray)
-            .map(|h| self.bvh.hit_record(&h))
+        self.bvh.trace1::<false>(ray).map(|h| self.bvh.hit_record(&h))
     }
 
     /// Whether anything lies on `ray` in `(tnear, tfar]`. Invalid rays are not occluded.
@@ -113,12 +111,7 @@ impl Scene {
     }
 
     /// Occlusion of every ray of a stream; `occluded` is resized to the stream's length.
-    pub fn occluded_stream(
-        &self,
-        rays: &RayStream,
-        occluded: &mut Vec<bool>,
-        coherence: Coherence,
-    ) {
+    pub fn occluded_stream(&self, rays: &RayStream, occluded: &mut Vec<bool>, coherence: Coherence) {
         occluded.clear();
         occluded.resize(rays.len(), false);
         self.occluded_range(rays, 0, occluded, coherence);
@@ -126,12 +119,7 @@ impl Scene {
 
     /// [`intersect_stream`](Self::intersect_stream) spread over the current rayon pool in chunks
     /// of [`STREAM_CHUNK`] rays.
-    pub fn intersect_stream_par(
-        &self,
-        rays: &RayStream,
-        hits: &mut HitStream,
-        coherence: Coherence,
-    ) {
+    pub fn intersect_stream_par(&self, rays: &RayStream, hits: &mut HitStream, coherence: Coherence) {
         hits.reset(rays.len());
         let c = STREAM_CHUNK;
         let h = hits;
@@ -148,27 +136,13 @@ impl Scene {
             .into_par_iter()
             .enumerate()
             .for_each(|(i, (t, u, v, ng_x, ng_y, ng_z, prim_id, geom_id))| {
-                let out = HitSlice {
-                    t,
-                    u,
-                    v,
-                    ng_x,
-                    ng_y,
-                    ng_z,
-                    prim_id,
-                    geom_id,
-                };
+                let out = HitSlice { t, u, v, ng_x, ng_y, ng_z, prim_id, geom_id };
                 self.intersect_range(rays, i * c, out, coherence);
             });
     }
 
     /// [`occluded_stream`](Self::occluded_stream) spread over the current rayon pool.
-    pub fn occluded_stream_par(
-        &self,
-        rays: &RayStream,
-        occluded: &mut Vec<bool>,
-        coherence: Coherence,
-    ) {
+    pub fn occluded_stream_par(&self, rays: &RayStream, occluded: &mut Vec<bool>, coherence: Coherence) {
         occluded.clear();
         occluded.resize(rays.len(), false);
         occluded
@@ -178,13 +152,7 @@ impl Scene {
     }
 
     /// Rays `start..start + out.len()` of `rays` into `out`.
-    fn intersect_range(
-        &self,
-        rays: &RayStream,
-        start: usize,
-        mut out: HitSlice<'_>,
-        coherence: Coherence,
-    ) {
+    fn intersect_range(&self, rays: &RayStream, start: usize, mut out: HitSlice<'_>, coherence: Coherence) {
         let n = out.len();
         match coherence {
             Coherence::Coherent => {
@@ -209,13 +177,7 @@ impl Scene {
         }
     }
 
-    fn occluded_range(
-        &self,
-        rays: &RayStream,
-        start: usize,
-        out: &mut [bool],
-        coherence: Coherence,
-    ) {
+    fn occluded_range(&self, rays: &RayStream, start: usize, out: &mut [bool], coherence: Coherence) {
         let n = out.len();
         match coherence {
             Coherence::Coherent => {
@@ -245,17 +207,9 @@ impl Scene {
         let mut tfar = ray.tfar;
         let mut best = None;
         for (bi, b) in self.bvh.blocks.iter().enumerate() {
-            if let Some((lane, t, u, v)) =
-                crate::geometry::triangle::intersect1(b, &r4, ray.tnear, tfar)
-            {
+            if let Some((lane, t, u, v)) = crate::geometry::triangle::intersect1(b, &r4, ray.tnear, tfar) {
                 tfar = t;
-                best = Some(crate::bvh::traverse::LeafHit {
-                    block: bi as u32,
-                    lane: lane as u32,
-                    t,
-                    u,
-                    v,
-                });
+                best = Some(crate::bvh::traverse::LeafHit { block: bi as u32, lane: lane as u32, t, u, v });
             }
         }
         best.map(|h| self.bvh.hit_record(&h))

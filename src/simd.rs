@@ -21,6 +21,13 @@ pub(crate) const fn low_bits(n: usize) -> u32 {
     if n >= 32 { u32::MAX } else { (1u32 << n) - 1 }
 }
 
+/// Truncates four floats to integers in one instruction (`cvttps2dq`). Out-of-range and NaN lanes
+/// give `i32::MIN`, so callers clamp the inputs first.
+#[inline(always)]
+pub(crate) fn trunc4(v: [f32; 4]) -> [i32; 4] {
+    f32x4::new(v).fast_trunc_int().to_array()
+}
+
 /// Turns flush-to-zero and denormals-are-zero on for the calling thread and returns the previous
 /// control word, so that the caller can restore it with [`restore_float_mode`].
 ///

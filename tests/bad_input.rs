@@ -4,10 +4,7 @@ mod common;
 
 use common::*;
 use glam::Vec3;
-use strahl::{
-    BuildConfig, Coherence, Error, HitPacket, HitStream, Ray, RayPacket, RayStream, Scene,
-    TriangleMesh,
-};
+use strahl::{BuildConfig, Coherence, Error, HitPacket, HitStream, Ray, RayPacket, RayStream, Scene, TriangleMesh};
 
 fn tmp(name: &str, text: &str) -> std::path::PathBuf {
     let dir = std::env::temp_dir().join(format!("strahl-bad-{}", std::process::id()));
@@ -59,42 +56,23 @@ fn bad_rays_miss_a_real_scene() {
     let scene = Scene::from_obj(data("cornell_box.obj"), &BuildConfig::default()).unwrap();
     answers_bad_rays_with_misses(&scene);
     let unit = scene_of(vec![
-        TriangleMesh::from_slices(
-            "t",
-            &[-1.0, -1.0, 0.0, 1.0, -1.0, 0.0, 0.0, 1.0, 0.0],
-            &[0, 1, 2],
-        )
-        .unwrap(),
+        TriangleMesh::from_slices("t", &[-1.0, -1.0, 0.0, 1.0, -1.0, 0.0, 0.0, 1.0, 0.0], &[0, 1, 2]).unwrap(),
     ]);
     answers_bad_rays_with_misses(&unit);
     // The same origin and direction with a good interval does hit.
-    assert!(
-        unit.intersect(&Ray::new(
-            Vec3::new(0.1, 0.1, 5.0),
-            Vec3::new(0.0, 0.0, -1.0)
-        ))
-        .is_some()
-    );
+    assert!(unit.intersect(&Ray::new(Vec3::new(0.1, 0.1, 5.0), Vec3::new(0.0, 0.0, -1.0))).is_some());
 }
 
 #[test]
 fn empty_scenes_miss_everything() {
-    for meshes in [
-        vec![],
-        vec![TriangleMesh::default()],
-        vec![TriangleMesh::from_slices("e", &[], &[]).unwrap()],
-    ] {
+    for meshes in [vec![], vec![TriangleMesh::default()], vec![TriangleMesh::from_slices("e", &[], &[]).unwrap()]] {
         let scene = scene_of(meshes);
         assert!(scene.bounds().is_none());
         assert_eq!(scene.stats().triangles, 0);
         let r = Ray::new(Vec3::ZERO, Vec3::X);
         assert!(scene.intersect(&r).is_none() && !scene.occluded(&r));
         let mut h = HitStream::default();
-        scene.intersect_stream_par(
-            &random_rays(1, 100).into_iter().collect(),
-            &mut h,
-            Coherence::Coherent,
-        );
+        scene.intersect_stream_par(&random_rays(1, 100).into_iter().collect(), &mut h, Coherence::Coherent);
         assert!((0..100).all(|i| h.get(i).is_none()));
         answers_bad_rays_with_misses(&scene);
     }
@@ -118,22 +96,14 @@ fn nan_and_degenerate_triangles_are_skipped_not_hit() {
     let (lo, hi) = scene.bounds().unwrap();
     assert!(lo.is_finite() && hi.is_finite());
     // From above, through all four layers: only the good triangle is ever hit.
-    let hit = scene
-        .intersect(&Ray::new(
-            Vec3::new(0.0, 0.0, 5.0),
-            Vec3::new(0.0, 0.0, -1.0),
-        ))
-        .unwrap();
+    let hit = scene.intersect(&Ray::new(Vec3::new(0.0, 0.0, 5.0), Vec3::new(0.0, 0.0, -1.0))).unwrap();
     assert_eq!(hit.prim_id, 0);
     assert!(!hit.t.is_nan() && !hit.u.is_nan() && hit.ng.is_finite());
 }
 
 #[test]
 fn malformed_obj_files_are_errors() {
-    assert!(matches!(
-        Scene::from_obj("/no/such/file.obj", &BuildConfig::default()),
-        Err(Error::Obj { .. })
-    ));
+    assert!(matches!(Scene::from_obj("/no/such/file.obj", &BuildConfig::default()), Err(Error::Obj { .. })));
     let p = tmp("garbage.obj", "v 1 2\nf 1 2 3\n");
     assert!(Scene::from_obj(&p, &BuildConfig::default()).is_err());
     let p = tmp("range.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n");
@@ -144,10 +114,7 @@ fn malformed_obj_files_are_errors() {
     if let Ok(s) = r {
         assert_eq!(s.stats().triangles, 0);
     }
-    let p = tmp(
-        "nan.obj",
-        "v nan 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 0\nf 1 2 3\nf 4 2 3\n",
-    );
+    let p = tmp("nan.obj", "v nan 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 0\nf 1 2 3\nf 4 2 3\n");
     if let Ok(s) = Scene::from_obj(&p, &BuildConfig::default()) {
         assert_eq!(s.stats().triangles, 1);
     }
@@ -162,12 +129,7 @@ fn out_of_range_indices_are_typed_errors() {
 #[test]
 fn tiny_and_signed_zero_directions_give_finite_hits() {
     let scene = scene_of(vec![
-        TriangleMesh::from_slices(
-            "t",
-            &[-1.0, -1.0, 0.0, 1.0, -1.0, 0.0, 0.0, 1.0, 0.0],
-            &[0, 1, 2],
-        )
-        .unwrap(),
+        TriangleMesh::from_slices("t", &[-1.0, -1.0, 0.0, 1.0, -1.0, 0.0, 0.0, 1.0, 0.0], &[0, 1, 2]).unwrap(),
     ]);
     for d in [
         Vec3::new(0.0, 0.0, -1.0),
@@ -176,12 +138,9 @@ fn tiny_and_signed_zero_directions_give_finite_hits() {
         Vec3::new(-0.0, 1e-38, -1e-3),
     ] {
         // Origins exactly on the bounding box planes (x = ±1, y = −1, y = 1).
-        for o in [
-            Vec3::new(0.0, 0.0, 3.0),
-            Vec3::new(-1.0, -1.0, 3.0),
-            Vec3::new(0.0, 1.0, 3.0),
-            Vec3::new(0.2, -1.0, 3.0),
-        ] {
+        for o in
+            [Vec3::new(0.0, 0.0, 3.0), Vec3::new(-1.0, -1.0, 3.0), Vec3::new(0.0, 1.0, 3.0), Vec3::new(0.2, -1.0, 3.0)]
+        {
             let r = Ray::new(o, d);
             let h = scene.intersect(&r);
             let b = scene.intersect_brute_force(&r);
@@ -190,11 +149,6 @@ fn tiny_and_signed_zero_directions_give_finite_hits() {
                 assert!(h.t.is_finite() && h.u.is_finite() && h.v.is_finite());
             }
         }
-        assert!(
-            scene
-                .intersect(&Ray::new(Vec3::new(0.0, 0.0, 3.0), d))
-                .is_some(),
-            "{d}"
-        );
+        assert!(scene.intersect(&Ray::new(Vec3::new(0.0, 0.0, 3.0), d)).is_some(), "{d}");
     }
 }

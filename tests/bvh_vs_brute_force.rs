@@ -4,9 +4,7 @@ mod common;
 
 use common::*;
 use glam::Vec3;
-use strahl::{
-    BuildConfig, Camera, Coherence, HitStream, Ray, RayStream, Scene, procedural, raygen,
-};
+use strahl::{BuildConfig, Camera, Coherence, HitStream, Ray, RayStream, Scene, procedural, raygen};
 
 fn check_scene(scene: &Scene, rays: &[Ray], what: &str) -> usize {
     let mut hits = 0;
@@ -14,11 +12,7 @@ fn check_scene(scene: &Scene, rays: &[Ray], what: &str) -> usize {
         let bvh = scene.intersect(r);
         let brute = scene.intersect_brute_force(r);
         assert_same_hit(bvh, brute, 1e-6, &format!("{what} ray {i}"));
-        assert_eq!(
-            scene.occluded(r),
-            brute.is_some(),
-            "{what} ray {i}: occluded"
-        );
+        assert_eq!(scene.occluded(r), brute.is_some(), "{what} ray {i}: occluded");
         hits += brute.is_some() as usize;
     }
     hits
@@ -30,10 +24,7 @@ fn random_soups_match_brute_force() {
         let scene = scene_of(vec![random_soup(seed, n, size)]);
         let rays = random_rays(seed, 4000);
         let hits = check_scene(&scene, &rays, &format!("soup {n}"));
-        assert!(
-            hits > 100 && hits < rays.len(),
-            "test rays should both hit and miss ({hits})"
-        );
+        assert!(hits > 100 && hits < rays.len(), "test rays should both hit and miss ({hits})");
     }
 }
 
@@ -44,19 +35,9 @@ fn every_build_preset_matches_brute_force() {
     for cfg in [
         BuildConfig::default(),
         BuildConfig::fast(),
-        BuildConfig {
-            min_leaf: 1,
-            max_leaf: 1,
-            ..BuildConfig::default()
-        },
-        BuildConfig {
-            max_leaf: 60,
-            ..BuildConfig::default()
-        },
-        BuildConfig {
-            parallel_threshold: 64,
-            ..BuildConfig::default()
-        },
+        BuildConfig { min_leaf: 1, max_leaf: 1, ..BuildConfig::default() },
+        BuildConfig { max_leaf: 60, ..BuildConfig::default() },
+        BuildConfig { parallel_threshold: 64, ..BuildConfig::default() },
     ] {
         let scene = Scene::build(vec![mesh.clone()], &cfg).unwrap();
         check_scene(&scene, &rays, &format!("{cfg:?}"));
@@ -87,10 +68,7 @@ fn tied_and_flat_geometry_matches_brute_force() {
     for _ in 0..3000 {
         let o = Vec3::new(rng.next_f32() * 2.0, 1.0, rng.next_f32() * 2.0);
         rays.push(Ray::new(o, Vec3::new(0.0, -1.0, 0.0)));
-        rays.push(Ray::new(
-            o,
-            Vec3::new(rng.next_f32() - 0.5, -1.0, rng.next_f32() - 0.5),
-        ));
+        rays.push(Ray::new(o, Vec3::new(rng.next_f32() - 0.5, -1.0, rng.next_f32() - 0.5)));
     }
     let hits = check_scene(&scene, &rays, "grid");
     assert!(hits > 2000);
@@ -101,33 +79,14 @@ fn real_meshes_match_brute_force() {
     let mut scenes: Vec<(String, Scene, Camera)> = Vec::new();
     let cornell = Scene::from_obj(data("cornell_box.obj"), &BuildConfig::default()).unwrap();
     assert_eq!(cornell.triangle_count(), 32);
-    let cam = Camera::look_at(
-        Vec3::new(278.0, 273.0, -450.0),
-        Vec3::new(278.0, 273.0, 0.0),
-        Vec3::Y,
-        60.0,
-    );
+    let cam = Camera::look_at(Vec3::new(278.0, 273.0, -450.0), Vec3::new(278.0, 273.0, 0.0), Vec3::Y, 60.0);
     scenes.push(("cornell".into(), cornell, cam));
     let flake = scene_of(vec![procedural::sphereflake(2, 6, 12)]);
-    let cam = Camera::look_at(
-        Vec3::new(0.0, 1.2, 4.5),
-        Vec3::new(0.0, 0.3, 0.0),
-        Vec3::Y,
-        60.0,
-    );
+    let cam = Camera::look_at(Vec3::new(0.0, 1.2, 4.5), Vec3::new(0.0, 0.3, 0.0), Vec3::Y, 60.0);
     scenes.push(("sphereflake".into(), flake, cam));
     if let Some(p) = shared_scene("bunny/bunny.obj") {
-        let cam = Camera::look_at(
-            Vec3::new(-0.017, 0.13, 0.17),
-            Vec3::new(-0.017, 0.10, 0.0),
-            Vec3::Y,
-            60.0,
-        );
-        scenes.push((
-            "bunny".into(),
-            Scene::from_obj(p, &BuildConfig::default()).unwrap(),
-            cam,
-        ));
+        let cam = Camera::look_at(Vec3::new(-0.017, 0.13, 0.17), Vec3::new(-0.017, 0.10, 0.0), Vec3::Y, 60.0);
+        scenes.push(("bunny".into(), Scene::from_obj(p, &BuildConfig::default()).unwrap(), cam));
     }
     for (name, scene, cam) in &scenes {
         let (primary, _) = raygen::primary(cam, 48, 48);
@@ -154,10 +113,7 @@ fn far_from_origin_matches_brute_force() {
         let shift = Vec3::new(offset, -offset * 0.5, offset * 0.25);
         mesh.map_positions(|p| p + shift);
         let scene = scene_of(vec![mesh]);
-        let rays: Vec<Ray> = random_rays(21, 2000)
-            .into_iter()
-            .map(|r| Ray::new(r.origin + shift, r.dir))
-            .collect();
+        let rays: Vec<Ray> = random_rays(21, 2000).into_iter().map(|r| Ray::new(r.origin + shift, r.dir)).collect();
         check_scene(&scene, &rays, &format!("offset {offset}"));
     }
 }
@@ -171,12 +127,7 @@ fn streams_of_any_length() {
         scene.intersect_stream_par(&rays, &mut hits, Coherence::Coherent);
         assert_eq!(hits.len(), n);
         for i in 0..n {
-            assert_same_hit(
-                hits.get(i),
-                scene.intersect_brute_force(&rays.get(i)),
-                1e-6,
-                "stream",
-            );
+            assert_same_hit(hits.get(i), scene.intersect_brute_force(&rays.get(i)), 1e-6, "stream");
         }
     }
 }

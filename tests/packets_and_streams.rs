@@ -4,20 +4,14 @@ mod common;
 
 use common::*;
 use glam::Vec3;
-use strahl::{
-    Camera, Coherence, HitPacket, HitStream, PACKET_WIDTH, Ray, RayPacket, RayStream, Scene, raygen,
-};
+use strahl::{Camera, Coherence, HitPacket, HitStream, PACKET_WIDTH, Ray, RayPacket, RayStream, Scene, raygen};
 
 fn all_apis_agree(scene: &Scene, rays: &RayStream, what: &str) {
     let n = rays.len();
     let single: Vec<_> = (0..n).map(|i| scene.intersect(&rays.get(i))).collect();
     let single_occ: Vec<bool> = (0..n).map(|i| scene.occluded(&rays.get(i))).collect();
     for i in 0..n {
-        assert_eq!(
-            single[i].is_some(),
-            single_occ[i],
-            "{what}: occluded vs intersect, ray {i}"
-        );
+        assert_eq!(single[i].is_some(), single_occ[i], "{what}: occluded vs intersect, ray {i}");
     }
     // Packets, with every other packet missing some lanes.
     for (k, start) in (0..n).step_by(PACKET_WIDTH).enumerate() {
@@ -29,23 +23,9 @@ fn all_apis_agree(scene: &Scene, rays: &RayStream, what: &str) {
         scene.intersect_packet(&p, &mut hp);
         let occ = scene.occluded_packet(&p);
         for lane in 0..PACKET_WIDTH.min(n - start) {
-            let expect = if p.is_active(lane) {
-                single[start + lane]
-            } else {
-                None
-            };
-            assert_same_hit(
-                hp.get(lane),
-                expect,
-                0.0,
-                &format!("{what}: packet ray {}", start + lane),
-            );
-            assert_eq!(
-                occ & (1 << lane) != 0,
-                expect.is_some(),
-                "{what}: occluded packet ray {}",
-                start + lane
-            );
+            let expect = if p.is_active(lane) { single[start + lane] } else { None };
+            assert_same_hit(hp.get(lane), expect, 0.0, &format!("{what}: packet ray {}", start + lane));
+            assert_eq!(occ & (1 << lane) != 0, expect.is_some(), "{what}: occluded packet ray {}", start + lane);
         }
         assert_eq!(occ & !p.active, 0, "inactive lanes are never occluded");
     }
@@ -59,18 +39,8 @@ fn all_apis_agree(scene: &Scene, rays: &RayStream, what: &str) {
         scene.occluded_stream(rays, &mut oa, coherence);
         scene.occluded_stream_par(rays, &mut ob, coherence);
         for i in 0..n {
-            assert_same_hit(
-                a.get(i),
-                single[i],
-                0.0,
-                &format!("{what}: stream {coherence:?} ray {i}"),
-            );
-            assert_same_hit(
-                b.get(i),
-                single[i],
-                0.0,
-                &format!("{what}: par stream {coherence:?} ray {i}"),
-            );
+            assert_same_hit(a.get(i), single[i], 0.0, &format!("{what}: stream {coherence:?} ray {i}"));
+            assert_same_hit(b.get(i), single[i], 0.0, &format!("{what}: par stream {coherence:?} ray {i}"));
             assert_eq!(oa[i], single_occ[i]);
             assert_eq!(ob[i], single_occ[i]);
         }
@@ -80,12 +50,7 @@ fn all_apis_agree(scene: &Scene, rays: &RayStream, what: &str) {
 #[test]
 fn coherent_camera_rays() {
     let scene = scene_of(vec![strahl::procedural::sphereflake(2, 8, 16)]);
-    let cam = Camera::look_at(
-        Vec3::new(0.0, 1.2, 4.5),
-        Vec3::new(0.0, 0.3, 0.0),
-        Vec3::Y,
-        60.0,
-    );
+    let cam = Camera::look_at(Vec3::new(0.0, 1.2, 4.5), Vec3::new(0.0, 0.3, 0.0), Vec3::Y, 60.0);
     let (rays, _) = raygen::primary(&cam, 130, 97);
     all_apis_agree(&scene, &rays, "sphereflake primary");
     let mut hits = HitStream::default();
@@ -121,10 +86,7 @@ fn mixed_bad_lanes_in_a_packet() {
     for lane in 0..PACKET_WIDTH {
         let expect = scene.intersect(&rays[lane]);
         if [1, 3, 5, 7, 9].contains(&lane) {
-            assert!(
-                expect.is_none() && hp.get(lane).is_none() && occ & (1 << lane) == 0,
-                "lane {lane}"
-            );
+            assert!(expect.is_none() && hp.get(lane).is_none() && occ & (1 << lane) == 0, "lane {lane}");
         } else {
             assert_same_hit(hp.get(lane), expect, 0.0, "good lane");
         }

@@ -93,9 +93,7 @@ fn decide(ray: &Ray, h: Option<(f64, [f64; 3])>) -> (Option<bool>, &'static str)
     if m.abs() <= EDGE_TOL {
         return (None, "edge_or_vertex");
     }
-    if (t - tn).abs() <= DEPTH_TOL * scale
-        || (tf.is_finite() && (t - tf).abs() <= DEPTH_TOL * scale)
-    {
+    if (t - tn).abs() <= DEPTH_TOL * scale || (tf.is_finite() && (t - tf).abs() <= DEPTH_TOL * scale) {
         return (None, "depth");
     }
     (Some(m > 0.0 && t > tn && t <= tf), "clear")
@@ -113,13 +111,7 @@ impl Lookup<'_> {
 }
 
 /// Compares strahl's answers `s` with Embree's `e` on `rays`.
-pub fn compare(
-    meshes: &[TriangleMesh],
-    rays: &RayStream,
-    occlusion: bool,
-    s: &Answers,
-    e: &Answers,
-) -> Accuracy {
+pub fn compare(meshes: &[TriangleMesh], rays: &RayStream, occlusion: bool, s: &Answers, e: &Answers) -> Accuracy {
     let n = rays.len();
     let look = Lookup { meshes };
     let mut acc = Accuracy::default();
@@ -155,32 +147,15 @@ pub fn compare(
                 match look.tri(g, p).map(|t| exact(&ray, t)) {
                     Some(h) => {
                         let (clear, kind) = decide(&ray, h);
-                        let (t64, mb) =
-                            h.map(|(t, b)| (t, min3(b))).unwrap_or((f64::NAN, f64::NAN));
+                        let (t64, mb) = h.map(|(t, b)| (t, min3(b))).unwrap_or((f64::NAN, f64::NAN));
                         match clear {
-                            None => (
-                                if kind == "depth" {
-                                    "depth_tie"
-                                } else {
-                                    "edge_or_vertex_tie"
-                                },
-                                mb,
-                                t64,
-                            ),
+                            None => (if kind == "depth" { "depth_tie" } else { "edge_or_vertex_tie" }, mb, t64),
                             // The reported hit is real: the engine that missed erred.
-                            Some(true) => {
-                                (if sh { "embree_error" } else { "strahl_error" }, mb, t64)
-                            }
-                            Some(false) => {
-                                (if sh { "strahl_error" } else { "embree_error" }, mb, t64)
-                            }
+                            Some(true) => (if sh { "embree_error" } else { "strahl_error" }, mb, t64),
+                            Some(false) => (if sh { "strahl_error" } else { "embree_error" }, mb, t64),
                         }
                     }
-                    None => (
-                        if sh { "strahl_error" } else { "embree_error" },
-                        f64::NAN,
-                        f64::NAN,
-                    ),
+                    None => (if sh { "strahl_error" } else { "embree_error" }, f64::NAN, f64::NAN),
                 }
             };
             tally(&mut acc.classified, verdict);
@@ -188,15 +163,7 @@ pub fn compare(
             cases.push((
                 sev,
                 -minb.abs(),
-                Case {
-                    ray: i,
-                    kind: "hit_miss",
-                    verdict,
-                    strahl: sa,
-                    embree: ea,
-                    min_barycentric: minb,
-                    t64,
-                },
+                Case { ray: i, kind: "hit_miss", verdict, strahl: sa, embree: ea, min_barycentric: minb, t64 },
             ));
             continue;
         }
@@ -223,11 +190,7 @@ pub fn compare(
                     ("depth_tie", mb, ts.min(te))
                 } else if ts < te {
                     // strahl's triangle is nearer; Embree's answer is wrong unless strahl's is not a hit.
-                    if min3(bs) > 0.0 {
-                        ("embree_error", mb, ts)
-                    } else {
-                        ("strahl_error", mb, te)
-                    }
+                    if min3(bs) > 0.0 { ("embree_error", mb, ts) } else { ("strahl_error", mb, te) }
                 } else if min3(be) > 0.0 {
                     ("strahl_error", mb, te)
                 } else {
@@ -241,27 +204,11 @@ pub fn compare(
         cases.push((
             sev,
             -minb.abs(),
-            Case {
-                ray: i,
-                kind: "primitive",
-                verdict,
-                strahl: sa,
-                embree: ea,
-                min_barycentric: minb,
-                t64,
-            },
+            Case { ray: i, kind: "primitive", verdict, strahl: sa, embree: ea, min_barycentric: minb, t64 },
         ));
     }
-    acc.hit_miss_agreement = if n == 0 {
-        1.0
-    } else {
-        1.0 - acc.hit_miss_disagreements as f64 / n as f64
-    };
-    acc.prim_agreement = if both == 0 {
-        1.0
-    } else {
-        same_prim as f64 / both as f64
-    };
+    acc.hit_miss_agreement = if n == 0 { 1.0 } else { 1.0 - acc.hit_miss_disagreements as f64 / n as f64 };
+    acc.prim_agreement = if both == 0 { 1.0 } else { same_prim as f64 / both as f64 };
     rel.sort_by(f64::total_cmp);
     if !rel.is_empty() {
         let q = |f: f64| rel[((rel.len() - 1) as f64 * f).round() as usize];
@@ -286,10 +233,7 @@ fn tally(d: &mut Disagreements, verdict: &str) {
 
 /// Float64 occlusion of `ray` over every triangle: (some triangle clearly occludes, the kind of
 /// tie if some triangle is within tolerance, nearest t, its smallest barycentric).
-fn brute_force_occlusion(
-    meshes: &[TriangleMesh],
-    ray: &Ray,
-) -> (bool, Option<&'static str>, f64, f64) {
+fn brute_force_occlusion(meshes: &[TriangleMesh], ray: &Ray) -> (bool, Option<&'static str>, f64, f64) {
     let mut tie = None;
     let mut best = (f64::INFINITY, f64::NAN);
     for m in meshes {
@@ -307,11 +251,7 @@ fn brute_force_occlusion(
                     let (t, b) = h.expect("ties exist");
                     if t > ray.tnear as f64 - DEPTH_TOL * t.abs() && t < best.0 {
                         best = (t, min3(b));
-                        tie = Some(if kind == "depth" {
-                            "depth_tie"
-                        } else {
-                            "edge_or_vertex_tie"
-                        });
+                        tie = Some(if kind == "depth" { "depth_tie" } else { "edge_or_vertex_tie" });
                     }
                 }
                 _ => {}

@@ -112,11 +112,7 @@ impl RTCIntersectContext {
     /// `rtcInitIntersectContext`, an inline function of the header, reimplemented.
     fn new(coherent: bool) -> Self {
         Self {
-            flags: if coherent {
-                RTC_INTERSECT_CONTEXT_FLAG_COHERENT
-            } else {
-                RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT
-            },
+            flags: if coherent { RTC_INTERSECT_CONTEXT_FLAG_COHERENT } else { RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT },
             filter: None,
             instID: [RTC_INVALID_GEOMETRY_ID],
         }
@@ -147,18 +143,8 @@ unsafe extern "C" {
     ) -> *mut c_void;
     fn rtcIntersect1(scene: RTCScene, context: *mut RTCIntersectContext, rayhit: *mut RTCRayHit);
     fn rtcOccluded1(scene: RTCScene, context: *mut RTCIntersectContext, ray: *mut RTCRay);
-    fn rtcIntersect16(
-        valid: *const i32,
-        scene: RTCScene,
-        context: *mut RTCIntersectContext,
-        rayhit: *mut RTCRayHit16,
-    );
-    fn rtcOccluded16(
-        valid: *const i32,
-        scene: RTCScene,
-        context: *mut RTCIntersectContext,
-        ray: *mut RTCRay16,
-    );
+    fn rtcIntersect16(valid: *const i32, scene: RTCScene, context: *mut RTCIntersectContext, rayhit: *mut RTCRayHit16);
+    fn rtcOccluded16(valid: *const i32, scene: RTCScene, context: *mut RTCIntersectContext, ray: *mut RTCRay16);
     fn rtcIntersect1M(
         scene: RTCScene,
         context: *mut RTCIntersectContext,
@@ -238,12 +224,7 @@ unsafe impl Sync for Scene {}
 
 impl Scene {
     /// Builds `meshes` with the given quality; `robust` sets `RTC_SCENE_FLAG_ROBUST`.
-    pub fn build(
-        device: &Device,
-        meshes: &[TriangleMesh],
-        quality: Quality,
-        robust: bool,
-    ) -> anyhow::Result<Self> {
+    pub fn build(device: &Device, meshes: &[TriangleMesh], quality: Quality, robust: bool) -> anyhow::Result<Self> {
         // SAFETY: `device.raw` is live; every pointer returned by rtcSetNewGeometryBuffer is checked
         // for null and points to a buffer of exactly `item_count × byte_stride` bytes (plus Embree's
         // own padding), which the copies below fill without overrunning.
@@ -268,18 +249,9 @@ impl Scene {
                     anyhow::bail!("rtcNewGeometry failed");
                 }
                 let nv = m.positions().len();
-                let vb = rtcSetNewGeometryBuffer(
-                    g,
-                    RTC_BUFFER_TYPE_VERTEX,
-                    0,
-                    RTC_FORMAT_FLOAT3,
-                    12,
-                    nv,
-                ) as *mut f32;
+                let vb = rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 12, nv) as *mut f32;
                 let nt = m.triangle_count();
-                let ib =
-                    rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 12, nt)
-                        as *mut u32;
+                let ib = rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 12, nt) as *mut u32;
                 if vb.is_null() || ib.is_null() {
                     rtcReleaseGeometry(g);
                     device.check("rtcSetNewGeometryBuffer")?;
@@ -344,15 +316,7 @@ impl Scene {
         }
         let mut ctx = RTCIntersectContext::new(coherent);
         // SAFETY: the slice holds `len` contiguous, aligned records with the given stride.
-        unsafe {
-            rtcIntersect1M(
-                self.raw,
-                &mut ctx,
-                rh.as_mut_ptr(),
-                rh.len() as c_uint,
-                size_of::<RTCRayHit>(),
-            )
-        }
+        unsafe { rtcIntersect1M(self.raw, &mut ctx, rh.as_mut_ptr(), rh.len() as c_uint, size_of::<RTCRayHit>()) }
     }
 
     /// `rtcOccluded1M` over a slice of rays.
@@ -362,15 +326,7 @@ impl Scene {
         }
         let mut ctx = RTCIntersectContext::new(coherent);
         // SAFETY: as for intersect1m.
-        unsafe {
-            rtcOccluded1M(
-                self.raw,
-                &mut ctx,
-                rays.as_mut_ptr(),
-                rays.len() as c_uint,
-                size_of::<RTCRay>(),
-            )
-        }
+        unsafe { rtcOccluded1M(self.raw, &mut ctx, rays.as_mut_ptr(), rays.len() as c_uint, size_of::<RTCRay>()) }
     }
 }
 

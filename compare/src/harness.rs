@@ -8,14 +8,12 @@ use glam::Vec3;
 use rayon::prelude::*;
 use serde::Serialize;
 use strahl::{
-    BuildConfig, Camera, Coherence, HitPacket, HitStream, INVALID_ID, PACKET_WIDTH, RayStream,
-    Scene, TriangleMesh, raygen,
+    BuildConfig, Camera, Coherence, HitPacket, HitStream, INVALID_ID, PACKET_WIDTH, RayStream, Scene, TriangleMesh,
+    raygen,
 };
 
 use crate::accuracy::{self, Accuracy};
-use crate::embree::{
-    self, RTC_INVALID_GEOMETRY_ID, RTCHit, RTCHit16, RTCRay, RTCRay16, RTCRayHit, RTCRayHit16,
-};
+use crate::embree::{self, RTC_INVALID_GEOMETRY_ID, RTCHit, RTCHit16, RTCRay, RTCRay16, RTCRayHit, RTCRayHit16};
 use crate::scenes::SceneSpec;
 
 /// Rays per parallel work item for the single and packet APIs, and Embree's stream chunk.
@@ -83,11 +81,7 @@ pub struct Answers {
 
 impl Answers {
     pub fn misses(n: usize) -> Self {
-        Self {
-            t: vec![f32::INFINITY; n],
-            geom: vec![INVALID_ID; n],
-            prim: vec![INVALID_ID; n],
-        }
+        Self { t: vec![f32::INFINITY; n], geom: vec![INVALID_ID; n], prim: vec![INVALID_ID; n] }
     }
 
     pub fn len(&self) -> usize {
@@ -104,11 +98,7 @@ impl Answers {
 
     /// Runs `f(start, t, geom, prim)` over chunks of [`CHUNK`] entries in parallel.
     fn par_fill(&mut self, f: impl Fn(usize, &mut [f32], &mut [u32], &mut [u32]) + Sync) {
-        (
-            self.t.par_chunks_mut(CHUNK),
-            self.geom.par_chunks_mut(CHUNK),
-            self.prim.par_chunks_mut(CHUNK),
-        )
+        (self.t.par_chunks_mut(CHUNK), self.geom.par_chunks_mut(CHUNK), self.prim.par_chunks_mut(CHUNK))
             .into_par_iter()
             .enumerate()
             .for_each(|(k, (t, g, p))| f(k * CHUNK, t, g, p));
@@ -129,11 +119,7 @@ impl Samples {
     pub fn median(&self) -> f64 {
         let mut s = self.seconds.clone();
         s.sort_by(f64::total_cmp);
-        if s.is_empty() {
-            f64::NAN
-        } else {
-            s[s.len() / 2]
-        }
+        if s.is_empty() { f64::NAN } else { s[s.len() / 2] }
     }
 }
 
@@ -155,11 +141,7 @@ impl ClassResult {
     pub fn mrays(&self, engine: usize, api: Api, median: bool) -> f64 {
         let s = &self.samples[engine][api as usize];
         let secs = if median { s.median() } else { s.best() };
-        if secs > 0.0 && secs.is_finite() {
-            self.rays as f64 / secs / 1e6
-        } else {
-            0.0
-        }
+        if secs > 0.0 && secs.is_finite() { self.rays as f64 / secs / 1e6 } else { 0.0 }
     }
 
     /// The fastest API of an engine by best time, with its Mrays/s.
@@ -217,13 +199,7 @@ pub struct Settings {
 
 impl Default for Settings {
     fn default() -> Self {
-        Self {
-            width: 1024,
-            passes: 5,
-            seed: 1,
-            build_repeats: 3,
-            keep_rays: false,
-        }
+        Self { width: 1024, passes: 5, seed: 1, build_repeats: 3, keep_rays: false }
     }
 }
 
@@ -257,8 +233,7 @@ pub fn run_scene(
         escene = Some(e);
     }
     let escene = escene.expect("built at least once");
-    let embree_high_ms =
-        embree::Scene::build(device, &meshes, embree::Quality::High, false)?.build_ms;
+    let embree_high_ms = embree::Scene::build(device, &meshes, embree::Quality::High, false)?.build_ms;
     let st = scene.stats();
     let build = BuildResult {
         strahl_ms,
@@ -280,10 +255,7 @@ pub fn run_scene(
     let (primary, pixels) = raygen::primary(&camera, w, w);
     let mut primary_hits = HitStream::default();
     pool.install(|| scene.intersect_stream_par(&primary, &mut primary_hits, Coherence::Coherent));
-    let diag = scene
-        .bounds()
-        .map(|(lo, hi)| (hi - lo).length())
-        .unwrap_or(1.0);
+    let diag = scene.bounds().map(|(lo, hi)| (hi - lo).length()).unwrap_or(1.0);
     let eps = 1e-4 * diag;
     let (shadow, shadow_src) = raygen::shadow(&primary, &primary_hits, light, eps);
     let (diffuse, _) = raygen::diffuse(&primary, &primary_hits, settings.seed, eps);
@@ -291,14 +263,9 @@ pub fn run_scene(
     let mut classes = Vec::new();
     let mut ray_sets = Vec::new();
     let mut shadow_answers = None;
-    for (class, rays) in [
-        (Class::Primary, &primary),
-        (Class::Shadow, &shadow),
-        (Class::Diffuse, &diffuse),
-    ] {
+    for (class, rays) in [(Class::Primary, &primary), (Class::Shadow, &shadow), (Class::Diffuse, &diffuse)] {
         progress(class.name());
-        let (result, s_ans, e_ans) =
-            run_class(&scene, &escene, &meshes, rays, class, pool, settings);
+        let (result, s_ans, e_ans) = run_class(&scene, &escene, &meshes, rays, class, pool, settings);
         if class == Class::Shadow {
             shadow_answers = Some(s_ans.clone());
         }
@@ -308,23 +275,8 @@ pub fn run_scene(
         classes.push(result);
     }
 
-    let image = shade(
-        &primary,
-        &primary_hits,
-        &pixels,
-        &shadow_src,
-        shadow_answers.as_ref(),
-        w,
-    );
-    Ok(SceneResult {
-        name: spec.name.clone(),
-        triangles,
-        build,
-        classes,
-        image,
-        width: w,
-        ray_sets,
-    })
+    let image = shade(&primary, &primary_hits, &pixels, &shadow_src, shadow_answers.as_ref(), w);
+    Ok(SceneResult { name: spec.name.clone(), triangles, build, classes, image, width: w, ray_sets })
 }
 
 /// Traces one ray set through all APIs of both engines, interleaved, and diffs the answers.
@@ -339,8 +291,7 @@ fn run_class(
 ) -> (ClassResult, Answers, Answers) {
     let n = rays.len();
     let mut samples: [[Samples; 3]; 2] = Default::default();
-    let mut answers: [[Answers; 3]; 2] =
-        std::array::from_fn(|_| std::array::from_fn(|_| Answers::misses(n)));
+    let mut answers: [[Answers; 3]; 2] = std::array::from_fn(|_| std::array::from_fn(|_| Answers::misses(n)));
     let pristine = embree_stream_rays(rays);
     let mut work_rh: Vec<RTCRayHit> = Vec::new();
     let mut work_r: Vec<RTCRay> = Vec::new();
@@ -389,11 +340,8 @@ fn run_class(
     }
     let [s, e] = answers;
     let consistent = |a: &[Answers; 3]| {
-        let same = (0..n)
-            .filter(|&i| {
-                (1..3).all(|k| a[k].geom[i] == a[0].geom[i] && a[k].prim[i] == a[0].prim[i])
-            })
-            .count();
+        let same =
+            (0..n).filter(|&i| (1..3).all(|k| a[k].geom[i] == a[0].geom[i] && a[k].prim[i] == a[0].prim[i])).count();
         if n == 0 { 1.0 } else { same as f64 / n as f64 }
     };
     let strahl_apis_consistent = consistent(&s);
@@ -401,11 +349,7 @@ fn run_class(
     let [s_single, _, _] = s;
     let [e_single, _, _] = e;
     let acc = accuracy::compare(meshes, rays, class.occlusion(), &s_single, &e_single);
-    let hit_rate = if n == 0 {
-        0.0
-    } else {
-        (0..n).filter(|&i| s_single.hit(i)).count() as f64 / n as f64
-    };
+    let hit_rate = if n == 0 { 0.0 } else { (0..n).filter(|&i| s_single.hit(i)).count() as f64 / n as f64 };
     let result = ClassResult {
         class,
         rays: n,
@@ -419,11 +363,7 @@ fn run_class(
 }
 
 fn coherence(class: Class) -> Coherence {
-    if class.coherent() {
-        Coherence::Coherent
-    } else {
-        Coherence::Incoherent
-    }
+    if class.coherent() { Coherence::Coherent } else { Coherence::Incoherent }
 }
 
 fn strahl_single(scene: &Scene, rays: &RayStream, class: Class, out: &mut Answers) {
@@ -432,11 +372,7 @@ fn strahl_single(scene: &Scene, rays: &RayStream, class: Class, out: &mut Answer
             let r = rays.get(start + k);
             if class.occlusion() {
                 let o = scene.occluded(&r);
-                (t[k], g[k], p[k]) = if o {
-                    (0.0, 0, 0)
-                } else {
-                    (f32::INFINITY, INVALID_ID, INVALID_ID)
-                };
+                (t[k], g[k], p[k]) = if o { (0.0, 0, 0) } else { (f32::INFINITY, INVALID_ID, INVALID_ID) };
             } else {
                 (t[k], g[k], p[k]) = match scene.intersect(&r) {
                     Some(h) => (h.t, h.geom_id, h.prim_id),
@@ -457,11 +393,8 @@ fn strahl_packet(scene: &Scene, rays: &RayStream, class: Class, out: &mut Answer
                 let bits = scene.occluded_packet(&packet);
                 for l in 0..m {
                     let o = bits & (1 << l) != 0;
-                    (t[k + l], g[k + l], p[k + l]) = if o {
-                        (0.0, 0, 0)
-                    } else {
-                        (f32::INFINITY, INVALID_ID, INVALID_ID)
-                    };
+                    (t[k + l], g[k + l], p[k + l]) =
+                        if o { (0.0, 0, 0) } else { (f32::INFINITY, INVALID_ID, INVALID_ID) };
                 }
             } else {
                 scene.intersect_packet(&packet, &mut hp);
@@ -473,13 +406,7 @@ fn strahl_packet(scene: &Scene, rays: &RayStream, class: Class, out: &mut Answer
     });
 }
 
-fn strahl_stream(
-    scene: &Scene,
-    rays: &RayStream,
-    class: Class,
-    hits: &mut HitStream,
-    occ: &mut Vec<bool>,
-) {
+fn strahl_stream(scene: &Scene, rays: &RayStream, class: Class, hits: &mut HitStream, occ: &mut Vec<bool>) {
     if class.occlusion() {
         scene.occluded_stream_par(rays, occ, coherence(class));
     } else {
@@ -490,11 +417,8 @@ fn strahl_stream(
 fn collect_strahl(class: Class, hits: &HitStream, occ: &[bool], out: &mut Answers) {
     for i in 0..out.len() {
         if class.occlusion() {
-            (out.t[i], out.geom[i], out.prim[i]) = if occ[i] {
-                (0.0, 0, 0)
-            } else {
-                (f32::INFINITY, INVALID_ID, INVALID_ID)
-            };
+            (out.t[i], out.geom[i], out.prim[i]) =
+                if occ[i] { (0.0, 0, 0) } else { (f32::INFINITY, INVALID_ID, INVALID_ID) };
         } else {
             (out.t[i], out.geom[i], out.prim[i]) = (hits.t[i], hits.geom_id[i], hits.prim_id[i]);
         }
@@ -529,12 +453,7 @@ fn empty_hit() -> RTCHit {
 }
 
 fn embree_stream_rays(rays: &RayStream) -> Vec<RTCRayHit> {
-    (0..rays.len())
-        .map(|i| RTCRayHit {
-            ray: embree_ray(rays, i),
-            hit: empty_hit(),
-        })
-        .collect()
+    (0..rays.len()).map(|i| RTCRayHit { ray: embree_ray(rays, i), hit: empty_hit() }).collect()
 }
 
 fn embree_single(scene: &embree::Scene, rays: &RayStream, class: Class, out: &mut Answers) {
@@ -545,16 +464,9 @@ fn embree_single(scene: &embree::Scene, rays: &RayStream, class: Class, out: &mu
                 let mut r = embree_ray(rays, start + k);
                 scene.occluded1(&mut r, coherent);
                 let o = r.tfar == f32::NEG_INFINITY;
-                (t[k], g[k], p[k]) = if o {
-                    (0.0, 0, 0)
-                } else {
-                    (f32::INFINITY, INVALID_ID, INVALID_ID)
-                };
+                (t[k], g[k], p[k]) = if o { (0.0, 0, 0) } else { (f32::INFINITY, INVALID_ID, INVALID_ID) };
             } else {
-                let mut rh = RTCRayHit {
-                    ray: embree_ray(rays, start + k),
-                    hit: empty_hit(),
-                };
+                let mut rh = RTCRayHit { ray: embree_ray(rays, start + k), hit: empty_hit() };
                 scene.intersect1(&mut rh, coherent);
                 (t[k], g[k], p[k]) = if rh.hit.geomID != RTC_INVALID_GEOMETRY_ID {
                     (rh.ray.tfar, rh.hit.geomID, rh.hit.primID)
@@ -616,11 +528,8 @@ fn embree_packet(scene: &embree::Scene, rays: &RayStream, class: Class, out: &mu
                 scene.occluded16(&valid, &mut rh.ray, coherent);
                 for l in 0..m {
                     let o = rh.ray.tfar[l] == f32::NEG_INFINITY;
-                    (t[k + l], g[k + l], p[k + l]) = if o {
-                        (0.0, 0, 0)
-                    } else {
-                        (f32::INFINITY, INVALID_ID, INVALID_ID)
-                    };
+                    (t[k + l], g[k + l], p[k + l]) =
+                        if o { (0.0, 0, 0) } else { (f32::INFINITY, INVALID_ID, INVALID_ID) };
                 }
             } else {
                 rh.hit.geomID = [RTC_INVALID_GEOMETRY_ID; 16];
@@ -641,11 +550,9 @@ fn embree_packet(scene: &embree::Scene, rays: &RayStream, class: Class, out: &mu
 fn embree_stream(scene: &embree::Scene, class: Class, rh: &mut [RTCRayHit], r: &mut [RTCRay]) {
     let coherent = class.coherent();
     if class.occlusion() {
-        r.par_chunks_mut(CHUNK)
-            .for_each(|c| scene.occluded1m(c, coherent));
+        r.par_chunks_mut(CHUNK).for_each(|c| scene.occluded1m(c, coherent));
     } else {
-        rh.par_chunks_mut(CHUNK)
-            .for_each(|c| scene.intersect1m(c, coherent));
+        rh.par_chunks_mut(CHUNK).for_each(|c| scene.intersect1m(c, coherent));
     }
 }
 
@@ -653,11 +560,8 @@ fn collect_embree(class: Class, rh: &[RTCRayHit], r: &[RTCRay], out: &mut Answer
     for i in 0..out.len() {
         if class.occlusion() {
             let o = r[i].tfar == f32::NEG_INFINITY;
-            (out.t[i], out.geom[i], out.prim[i]) = if o {
-                (0.0, 0, 0)
-            } else {
-                (f32::INFINITY, INVALID_ID, INVALID_ID)
-            };
+            (out.t[i], out.geom[i], out.prim[i]) =
+                if o { (0.0, 0, 0) } else { (f32::INFINITY, INVALID_ID, INVALID_ID) };
         } else {
             let h = &rh[i];
             (out.t[i], out.geom[i], out.prim[i]) = if h.hit.geomID != RTC_INVALID_GEOMETRY_ID {
@@ -689,10 +593,7 @@ fn shade(
         let px = pixels[i] as usize * 3;
         let rgb = match hits.get(i) {
             Some(h) => {
-                let c =
-                    h.ng.normalize_or_zero()
-                        .dot(rays.get(i).dir.normalize_or_zero())
-                        .abs();
+                let c = h.ng.normalize_or_zero().dot(rays.get(i).dir.normalize_or_zero()).abs();
                 let v = (0.1 + 0.9 * c * if lit[i] { 1.0 } else { 0.35 }).clamp(0.0, 1.0);
                 let g = (v * 255.0) as u8;
                 [g, g, (v * 235.0 + 20.0).min(255.0) as u8]

@@ -19,16 +19,7 @@ pub fn write_rays(path: &Path, rays: &RayStream) -> anyhow::Result<()> {
     buf.extend_from_slice(b"RAYS");
     buf.extend_from_slice(&(rays.len() as u32).to_le_bytes());
     for i in 0..rays.len() {
-        for x in [
-            rays.ox[i],
-            rays.oy[i],
-            rays.oz[i],
-            rays.tnear[i],
-            rays.dx[i],
-            rays.dy[i],
-            rays.dz[i],
-            rays.tfar[i],
-        ] {
+        for x in [rays.ox[i], rays.oy[i], rays.oz[i], rays.tnear[i], rays.dx[i], rays.dy[i], rays.dz[i], rays.tfar[i]] {
             buf.extend_from_slice(&x.to_le_bytes());
         }
     }
@@ -48,11 +39,7 @@ pub fn read_rays(path: &Path) -> anyhow::Result<RayStream> {
     let n = u32::from_le_bytes(buf[4..8].try_into().expect("4 bytes")) as usize;
     let need = n.checked_mul(32).and_then(|b| b.checked_add(8));
     if need != Some(buf.len()) {
-        bail!(
-            "{}: header says {n} rays, but the file has {} bytes",
-            path.display(),
-            buf.len()
-        );
+        bail!("{}: header says {n} rays, but the file has {} bytes", path.display(), buf.len());
     }
     let f = |k: usize| f32::from_le_bytes(buf[k..k + 4].try_into().expect("4 bytes"));
     let mut rays = RayStream::with_capacity(n);
@@ -87,10 +74,7 @@ pub fn write_hits(path: &Path, answers: &Answers, offsets: &[u32]) -> anyhow::Re
     let mut buf = Vec::with_capacity(answers.len() * 8);
     for i in 0..answers.len() {
         let (t, id) = if answers.hit(i) {
-            (
-                answers.t[i],
-                offsets.get(answers.geom[i] as usize).copied().unwrap_or(0) + answers.prim[i],
-            )
+            (answers.t[i], offsets.get(answers.geom[i] as usize).copied().unwrap_or(0) + answers.prim[i])
         } else {
             (f32::INFINITY, INVALID_ID)
         };
@@ -112,9 +96,8 @@ mod tests {
     fn rays_round_trip_and_bad_files_are_errors() {
         let dir = std::env::temp_dir().join(format!("compare-rayfile-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
-        let rays: RayStream = (0..5)
-            .map(|i| Ray::segment(Vec3::splat(i as f32), Vec3::X, 0.5, f32::INFINITY))
-            .collect();
+        let rays: RayStream =
+            (0..5).map(|i| Ray::segment(Vec3::splat(i as f32), Vec3::X, 0.5, f32::INFINITY)).collect();
         let p = dir.join("a.rays");
         write_rays(&p, &rays).unwrap();
         assert_eq!(read_rays(&p).unwrap(), rays);

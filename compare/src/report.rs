@@ -106,27 +106,12 @@ pub fn build_report(results: &[SceneResult], threads: usize, width: u32, passes:
                         t_rel_max: c.accuracy.t_rel_max,
                         disagreements: c.accuracy.classified.clone(),
                         worst: c.accuracy.worst.clone(),
-                        mrays: Engines {
-                            strahl: apis(c, 0, false),
-                            embree: apis(c, 1, false),
-                        },
-                        mrays_median: Engines {
-                            strahl: apis(c, 0, true),
-                            embree: apis(c, 1, true),
-                        },
+                        mrays: Engines { strahl: apis(c, 0, false), embree: apis(c, 1, false) },
+                        mrays_median: Engines { strahl: apis(c, 0, true), embree: apis(c, 1, true) },
                         ratio: Apis {
-                            single: ratio(
-                                c.mrays(0, Api::Single, false),
-                                c.mrays(1, Api::Single, false),
-                            ),
-                            packet: ratio(
-                                c.mrays(0, Api::Packet, false),
-                                c.mrays(1, Api::Packet, false),
-                            ),
-                            stream: ratio(
-                                c.mrays(0, Api::Stream, false),
-                                c.mrays(1, Api::Stream, false),
-                            ),
+                            single: ratio(c.mrays(0, Api::Single, false), c.mrays(1, Api::Single, false)),
+                            packet: ratio(c.mrays(0, Api::Packet, false), c.mrays(1, Api::Packet, false)),
+                            stream: ratio(c.mrays(0, Api::Stream, false), c.mrays(1, Api::Stream, false)),
                         },
                         best_ratio: br,
                         best_api: (c.best(0).0.name(), c.best(1).0.name()),
@@ -137,11 +122,7 @@ pub fn build_report(results: &[SceneResult], threads: usize, width: u32, passes:
                 .collect(),
         })
         .collect();
-    let geomean = if logs.is_empty() {
-        0.0
-    } else {
-        (logs.iter().sum::<f64>() / logs.len() as f64).exp()
-    };
+    let geomean = if logs.is_empty() { 0.0 } else { (logs.iter().sum::<f64>() / logs.len() as f64).exp() };
     Report {
         threads,
         date: today(),
@@ -173,9 +154,7 @@ fn machine() -> String {
                 .map(|l| l.split(':').nth(1).unwrap_or("").trim().to_string())
         })
         .unwrap_or_else(|| "unknown CPU".into());
-    let cores = std::thread::available_parallelism()
-        .map(|n| n.get())
-        .unwrap_or(0);
+    let cores = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(0);
     format!("{cpu}, {cores} cores visible")
 }
 
@@ -202,11 +181,7 @@ pub fn markdown(r: &Report) -> String {
         "{} · {} · {} threads for both engines · {}×{} primary rays · best of {} passes · strahl {}\n",
         r.date, r.machine, r.threads, r.width, r.width, r.passes, r.strahl_commit
     );
-    let _ = writeln!(
-        s,
-        "Geometric mean of best-vs-best ratios (strahl/Embree): **{:.2}×**\n",
-        r.geomean_best_ratio
-    );
+    let _ = writeln!(s, "Geometric mean of best-vs-best ratios (strahl/Embree): **{:.2}×**\n", r.geomean_best_ratio);
     let _ = writeln!(s, "## Throughput (Mrays/s, best pass) and accuracy\n");
     let _ = writeln!(
         s,
@@ -289,11 +264,7 @@ pub fn markdown(r: &Report) -> String {
     let worst: Vec<(&str, &str, &Case)> = r
         .scenes
         .iter()
-        .flat_map(|sc| {
-            sc.classes
-                .iter()
-                .flat_map(move |c| c.worst.iter().map(move |w| (sc.name.as_str(), c.class, w)))
-        })
+        .flat_map(|sc| sc.classes.iter().flat_map(move |c| c.worst.iter().map(move |w| (sc.name.as_str(), c.class, w))))
         .collect();
     if !worst.is_empty() {
         let _ = writeln!(s, "\nWorst cases (up to 5 per scene and class):\n");
@@ -345,10 +316,7 @@ pub fn ensure_font() -> bool {
     use std::sync::OnceLock;
     static OK: OnceLock<bool> = OnceLock::new();
     *OK.get_or_init(|| match load_font() {
-        Some(b) => {
-            plotters::style::register_font("sans-serif", plotters::style::FontStyle::Normal, b)
-                .is_ok()
-        }
+        Some(b) => plotters::style::register_font("sans-serif", plotters::style::FontStyle::Normal, b).is_ok(),
         None => false,
     })
 }
@@ -361,26 +329,14 @@ pub fn ratio_chart(path: &Path, r: &Report) -> anyhow::Result<()> {
     }
     let names: Vec<&str> = r.scenes.iter().map(|s| s.name.as_str()).collect();
     let classes = ["primary", "shadow", "diffuse"];
-    let colors = [
-        RGBColor(66, 133, 244),
-        RGBColor(52, 168, 83),
-        RGBColor(234, 67, 53),
-    ];
-    let ymax = r
-        .scenes
-        .iter()
-        .flat_map(|s| s.classes.iter().map(|c| c.best_ratio))
-        .fold(1.2f64, f64::max)
-        * 1.15;
+    let colors = [RGBColor(66, 133, 244), RGBColor(52, 168, 83), RGBColor(234, 67, 53)];
+    let ymax = r.scenes.iter().flat_map(|s| s.classes.iter().map(|c| c.best_ratio)).fold(1.2f64, f64::max) * 1.15;
     let root = BitMapBackend::new(path, (1200, 600)).into_drawing_area();
     root.fill(&WHITE)?;
     let n = names.len().max(1);
     let mut chart = ChartBuilder::on(&root)
         .caption(
-            format!(
-                "strahl / Embree throughput, best API vs best API ({} threads)",
-                r.threads
-            ),
+            format!("strahl / Embree throughput, best API vs best API ({} threads)", r.threads),
             ("sans-serif", 24),
         )
         .margin(20)
@@ -403,12 +359,7 @@ pub fn ratio_chart(path: &Path, r: &Report) -> anyhow::Result<()> {
             .scenes
             .iter()
             .enumerate()
-            .filter_map(|(i, s)| {
-                s.classes
-                    .iter()
-                    .find(|c| c.class == *cl)
-                    .map(|c| (i as f64, c.best_ratio))
-            })
+            .filter_map(|(i, s)| s.classes.iter().find(|c| c.class == *cl).map(|c| (i as f64, c.best_ratio)))
             .collect();
         let color = colors[k];
         chart
@@ -419,10 +370,7 @@ pub fn ratio_chart(path: &Path, r: &Report) -> anyhow::Result<()> {
             .label(*cl)
             .legend(move |(x, y)| Rectangle::new([(x, y - 6), (x + 12, y + 6)], color.filled()));
     }
-    chart.draw_series(LineSeries::new(
-        vec![(0.0, 1.0), (n as f64, 1.0)],
-        BLACK.stroke_width(2),
-    ))?;
+    chart.draw_series(LineSeries::new(vec![(0.0, 1.0), (n as f64, 1.0)], BLACK.stroke_width(2)))?;
     chart
         .configure_series_labels()
         .background_style(WHITE.mix(0.8))

@@ -31,55 +31,13 @@ pub struct SceneSpec {
 
 /// The cameras and lights of BENCHMARKING.md: name, folder/file, eye, look-at, light.
 const SHARED: [(&str, &str, [f32; 3], [f32; 3], [f32; 3]); 7] = [
-    (
-        "cornell_box",
-        "cornell_box/cornell_box.obj",
-        [278.0, 273.0, -450.0],
-        [278.0, 273.0, 0.0],
-        [278.0, 540.0, 279.0],
-    ),
-    (
-        "teapot",
-        "teapot/teapot.obj",
-        [0.217, 2.5, 6.0],
-        [0.217, 1.4, 0.0],
-        [3.0, 7.0, 5.0],
-    ),
-    (
-        "bunny",
-        "bunny/bunny.obj",
-        [-0.017, 0.13, 0.17],
-        [-0.017, 0.10, 0.0],
-        [0.1, 0.3, 0.2],
-    ),
-    (
-        "sponza_dabrovic",
-        "sponza_dabrovic/sponza.obj",
-        [-10.0, 3.0, 0.0],
-        [10.0, 4.0, 0.0],
-        [0.0, 12.0, 0.0],
-    ),
-    (
-        "sibenik",
-        "sibenik/sibenik.obj",
-        [-15.0, -8.0, 0.0],
-        [10.0, -5.0, 0.0],
-        [0.0, -5.0, 0.0],
-    ),
-    (
-        "igea",
-        "igea/igea.obj",
-        [0.0, 0.0, 0.11],
-        [0.0, 0.0, 0.0],
-        [0.05, 0.1, 0.12],
-    ),
-    (
-        "conference",
-        "conference/conference.obj",
-        [1600.0, 450.0, 500.0],
-        [0.0, 100.0, -300.0],
-        [400.0, 550.0, -100.0],
-    ),
+    ("cornell_box", "cornell_box/cornell_box.obj", [278.0, 273.0, -450.0], [278.0, 273.0, 0.0], [278.0, 540.0, 279.0]),
+    ("teapot", "teapot/teapot.obj", [0.217, 2.5, 6.0], [0.217, 1.4, 0.0], [3.0, 7.0, 5.0]),
+    ("bunny", "bunny/bunny.obj", [-0.017, 0.13, 0.17], [-0.017, 0.10, 0.0], [0.1, 0.3, 0.2]),
+    ("sponza_dabrovic", "sponza_dabrovic/sponza.obj", [-10.0, 3.0, 0.0], [10.0, 4.0, 0.0], [0.0, 12.0, 0.0]),
+    ("sibenik", "sibenik/sibenik.obj", [-15.0, -8.0, 0.0], [10.0, -5.0, 0.0], [0.0, -5.0, 0.0]),
+    ("igea", "igea/igea.obj", [0.0, 0.0, 0.11], [0.0, 0.0, 0.0], [0.05, 0.1, 0.12]),
+    ("conference", "conference/conference.obj", [1600.0, 450.0, 500.0], [0.0, 100.0, -300.0], [400.0, 550.0, -100.0]),
 ];
 
 /// The shared scenes present under `root` (normally `../shared/scenes`).
@@ -102,10 +60,7 @@ pub fn data(dir: &Path) -> Vec<SceneSpec> {
     let mut v = vec![SceneSpec {
         name: "cornell_box_data".into(),
         source: Source::Obj(dir.join("cornell_box.obj")),
-        view: Some((
-            Vec3::new(278.0, 273.0, -450.0),
-            Vec3::new(278.0, 273.0, 0.0),
-        )),
+        view: Some((Vec3::new(278.0, 273.0, -450.0), Vec3::new(278.0, 273.0, 0.0))),
         light: Some(Vec3::new(278.0, 540.0, 279.0)),
     }];
     v.push(sphereflake());
@@ -116,11 +71,7 @@ pub fn data(dir: &Path) -> Vec<SceneSpec> {
 pub fn sphereflake() -> SceneSpec {
     SceneSpec {
         name: "sphereflake".into(),
-        source: Source::Sphereflake {
-            levels: 3,
-            stacks: 12,
-            slices: 24,
-        },
+        source: Source::Sphereflake { levels: 3, stacks: 12, slices: 24 },
         view: Some((Vec3::new(0.0, 1.3, 3.4), Vec3::new(0.0, 0.25, 0.0))),
         light: Some(Vec3::new(3.0, 6.0, 4.0)),
     }
@@ -143,15 +94,8 @@ pub fn from_path(p: &Path) -> anyhow::Result<SceneSpec> {
     } else {
         p.to_path_buf()
     };
-    let stem = file
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "scene".into());
-    let known = SHARED.iter().find(|s| {
-        Path::new(s.1)
-            .file_stem()
-            .is_some_and(|f| f.to_string_lossy() == stem)
-    });
+    let stem = file.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "scene".into());
+    let known = SHARED.iter().find(|s| Path::new(s.1).file_stem().is_some_and(|f| f.to_string_lossy() == stem));
     Ok(match known {
         Some(&(name, _, eye, at, light)) => SceneSpec {
             name: name.into(),
@@ -159,12 +103,7 @@ pub fn from_path(p: &Path) -> anyhow::Result<SceneSpec> {
             view: Some((Vec3::from(eye), Vec3::from(at))),
             light: Some(Vec3::from(light)),
         },
-        None => SceneSpec {
-            name: stem,
-            source: Source::Obj(file),
-            view: None,
-            light: None,
-        },
+        None => SceneSpec { name: stem, source: Source::Obj(file), view: None, light: None },
     })
 }
 
@@ -172,11 +111,9 @@ impl SceneSpec {
     pub fn load(&self) -> anyhow::Result<Vec<TriangleMesh>> {
         match &self.source {
             Source::Obj(p) => load_obj(p).with_context(|| format!("loading scene {}", self.name)),
-            Source::Sphereflake {
-                levels,
-                stacks,
-                slices,
-            } => Ok(vec![procedural::sphereflake(*levels, *stacks, *slices)]),
+            Source::Sphereflake { levels, stacks, slices } => {
+                Ok(vec![procedural::sphereflake(*levels, *stacks, *slices)])
+            }
         }
     }
 
@@ -185,12 +122,8 @@ impl SceneSpec {
         let (lo, hi) = bounds.unwrap_or((Vec3::splat(-1.0), Vec3::splat(1.0)));
         let c = (lo + hi) * 0.5;
         let d = (hi - lo).length().max(1e-6);
-        let view = self
-            .view
-            .unwrap_or((c + Vec3::new(0.3, 0.35, 1.0).normalize() * d * 1.1, c));
-        let light = self
-            .light
-            .unwrap_or(c + Vec3::new(0.3 * d, 0.8 * d, 0.5 * d));
+        let view = self.view.unwrap_or((c + Vec3::new(0.3, 0.35, 1.0).normalize() * d * 1.1, c));
+        let light = self.light.unwrap_or(c + Vec3::new(0.3 * d, 0.8 * d, 0.5 * d));
         (view, light)
     }
 }

@@ -8,11 +8,12 @@
 //! largest surface area until it has [`WIDTH`] children; then recurse, in parallel with rayon
 //! above [`BuildConfig::parallel_threshold`] primitives.
 
-use glam::Vec3A;
+use glam::{Vec3A, Vec4};
 use rayon::prelude::*;
 
 use super::node::{MAX_LEAF_BLOCKS, WIDTH};
 use crate::geometry::triangle::BLOCK;
+use crate::simd::trunc4;
 
 /// Builder settings. Costs are per node visit and per block test, as in Embree's statistics.
 #[derive(Clone, Debug, PartialEq)]
@@ -48,16 +49,13 @@ impl Default for BuildConfig {
 impl BuildConfig {
     /// Fewer bins: a faster build of a slightly worse tree.
     pub fn fast() -> Self {
-        Self {
-            bins: 16,
-            ..Self::default()
-        }
+        Self { bins: 16, ..Self::default() }
     }
 
     fn clamped(&self) -> Self {
         let max_leaf = self.max_leaf.clamp(1, MAX_LEAF_BLOCKS * BLOCK);
         Self {
-            bins: self.bins.clamp(2, 256),
+            bins: self.bins.clamp(2, MAX_BINS),
             min_leaf: self.min_leaf.clamp(1, max_leaf),
             max_leaf,
             traversal_cost: self.traversal_cost.max(0.0),
@@ -66,6 +64,9 @@ impl BuildConfig {
         }
     }
 }
+
+/// Most bins per axis (fixed-size bin arrays on the stack).
+pub const MAX_BINS: usize = 32;
 
 /// Past this many wide levels, sets are split at the object median so that depth (and the
 /// traversal stack) stays bounded whatever the input.
@@ -79,10 +80,7 @@ pub(crate) struct Aabb {
 }
 
 impl Aabb {
-    pub const EMPTY: Self = Self {
-        lo: Vec3A::INFINITY,
-        hi: Vec3A::NEG_INFINITY,
-    };
+    pub const EMPTY: Self = Self { lo: Vec3A::INFINITY, hi: Vec3A::NEG_INFINITY };
 
     #[inline]
     pub fn grow(&mut self, o: &Aabb) {
@@ -104,18 +102,33 @@ impl Aabb {
     }
 }
 
-/// A primitive as the builder sees it: its box and its index.
+/// A primitive as the builder sees it: its box, with its index in the spare fourth lane of the
+/// lower corner (Embree's `PrimRef` layout), 32 bytes, so partitioning moves half a cache line.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct PrimRef {
-    pub bounds: Aabb,
-    pub id: u32,
+    lo: Vec4,
+    hi: Vec4,
 }
 
 impl PrimRef {
+    pub fn new(bounds: Aabb, id: u32) -> Self {
+        Self { lo: bounds.lo.extend(f32::from_bits(id)), hi: bounds.hi.extend(0.0) }
+    }
+
+    #[inline]
+    pub fn id(&self) -> u32 {
+        self.lo.w.to_bits()
+    }
+
+    #[inline]
+    pub fn bounds(&self) -> Aabb {
+        Aabb { lo: Vec3A::from_vec4(self.lo), hi: Vec3A::from_vec4(self.hi) }
+    }
+
     /// Twice the centroid (saves a multiply; only ratios of it are used).
     #[inline]
     fn center2(&self) -> Vec3A {
-        self.bounds.lo + self.bounds.hi
+        Vec3A::from_vec4(self.lo) + Vec3A::from_vec4(self.hi)
     }
 }
 
@@ -140,6 +153,8 @@ struct Split {
     cost: f32,
     scale: f32,
     offset: f32,
+    /// Bins used for this split.
+    bins: usize,
 }
 
 /// A set of primitives under construction: a range of the reference array with its bounds.
@@ -158,25 +173,23 @@ fn blocks(n: usize) -> f32 {
 
 #[derive(Clone)]
 struct Bins {
-    boxes: Vec<[Aabb; 3]>,
-    counts: Vec<[u32; 3]>,
+    boxes: [[Aabb; 3]; MAX_BINS],
+    counts: [[u32; 3]; MAX_BINS],
+    n: usize,
 }
 
 impl Bins {
     fn new(n: usize) -> Self {
-        Self {
-            boxes: vec![[Aabb::EMPTY; 3]; n],
-            counts: vec![[0; 3]; n],
-        }
+        Self { boxes: [[Aabb::EMPTY; 3]; MAX_BINS], counts: [[0; 3]; MAX_BINS], n }
     }
 
     fn merge(mut self, o: Bins) -> Bins {
-        for (a, b) in self.boxes.iter_mut().zip(&o.boxes) {
+        for (a, b) in self.boxes.iter_mut().zip(&o.boxes).take(self.n) {
             for k in 0..3 {
                 a[k].grow(&b[k]);
             }
         }
-        for (a, b) in self.counts.iter_mut().zip(&o.counts) {
+        for (a, b) in self.counts.iter_mut().zip(&o.counts).take(self.n) {
             for k in 0..3 {
                 a[k] += b[k];
             }
@@ -192,13 +205,15 @@ fn bin_of(c: f32, offset: f32, scale: f32, nbins: usize) -> usize {
 }
 
 fn bin_into(bins: &mut Bins, prims: &[PrimRef], offset: Vec3A, scale: Vec3A) {
-    let n = bins.counts.len();
+    let last = Vec3A::splat((bins.n - 1) as f32);
     for p in prims {
-        let c = p.center2();
+        // All three bin indices at once; the clamp keeps the truncation in range (NaN-free input).
+        let b = trunc4(((p.center2() - offset) * scale).clamp(Vec3A::ZERO, last).extend(0.0).to_array());
+        let pb = p.bounds();
         for a in 0..3 {
-            let b = bin_of(c[a], offset[a], scale[a], n);
-            bins.boxes[b][a].grow(&p.bounds);
-            bins.counts[b][a] += 1;
+            let i = b[a] as usize;
+            bins.boxes[i][a].grow(&pb);
+            bins.counts[i][a] += 1;
         }
     }
 }
@@ -206,31 +221,35 @@ fn bin_into(bins: &mut Bins, prims: &[PrimRef], offset: Vec3A, scale: Vec3A) {
 /// The best binned SAH split of `prims` (whose doubled centroids lie in `cb`), if any axis has
 /// extent.
 fn find_split(prims: &[PrimRef], cb: &Aabb, cfg: &BuildConfig) -> Option<Split> {
-    let nb = cfg.bins;
+    // Small sets get fewer bins: the bins are cleared on every call, and a set of 10 primitives
+    // gains nothing from 32 of them.
+    let nb = cfg.bins.min(prims.len().next_power_of_two().max(4));
     let ext = cb.hi - cb.lo;
     // Slightly less than nb / extent so that the largest centroid lands in the last bin.
-    let scale = Vec3A::select(
-        ext.cmpgt(Vec3A::ZERO),
-        Vec3A::splat(nb as f32 * 0.99999) / ext,
-        Vec3A::ZERO,
-    );
-    let bins = if prims.len() >= cfg.parallel_threshold * 4 {
-        prims
+    let scale = Vec3A::select(ext.cmpgt(Vec3A::ZERO), Vec3A::splat(nb as f32 * 0.99999) / ext, Vec3A::ZERO);
+    // Bins live on this frame and are filled in place (a 3 KB value is not worth moving).
+    let mut serial;
+    let parallel;
+    let bins: &Bins = if prims.len() >= cfg.parallel_threshold * 4 {
+        parallel = prims
             .par_chunks(cfg.parallel_threshold)
-            .map(|c| {
-                let mut b = Bins::new(nb);
-                bin_into(&mut b, c, cb.lo, scale);
-                b
-            })
-            .reduce(|| Bins::new(nb), Bins::merge)
+            .fold(
+                || Bins::new(nb),
+                |mut b, c| {
+                    bin_into(&mut b, c, cb.lo, scale);
+                    b
+                },
+            )
+            .reduce(|| Bins::new(nb), Bins::merge);
+        &parallel
     } else {
-        let mut b = Bins::new(nb);
-        bin_into(&mut b, prims, cb.lo, scale);
-        b
+        serial = Bins::new(nb);
+        bin_into(&mut serial, prims, cb.lo, scale);
+        &serial
     };
     let mut best: Option<Split> = None;
-    let mut right_area = vec![0.0f32; nb];
-    let mut right_count = vec![0usize; nb];
+    let mut right_area = [0.0f32; MAX_BINS];
+    let mut right_count = [0usize; MAX_BINS];
     for axis in 0..3 {
         if scale[axis] == 0.0 {
             continue;
@@ -255,69 +274,61 @@ fn find_split(prims: &[PrimRef], cb: &Aabb, cfg: &BuildConfig) -> Option<Split> 
             }
             let cost = acc.half_area() * blocks(cnt) + right_area[i] * blocks(right_count[i]);
             if best.is_none_or(|b| cost < b.cost) {
-                best = Some(Split {
-                    axis,
-                    pos: i,
-                    cost,
-                    scale: scale[axis],
-                    offset: cb.lo[axis],
-                });
+                best = Some(Split { axis, pos: i, cost, scale: scale[axis], offset: cb.lo[axis], bins: nb });
             }
         }
     }
     best
 }
 
-/// Reorders `prims` so that the left side of `split` comes first; returns the left count.
-fn partition(prims: &mut [PrimRef], split: &Split, nbins: usize) -> usize {
-    let goes_left =
-        |p: &PrimRef| bin_of(p.center2()[split.axis], split.offset, split.scale, nbins) < split.pos;
+/// Reorders `prims` so that the left side of `split` comes first, computing the bounds of both
+/// sides in the same pass; returns the left count and both sides' `(bounds, centroid bounds)`.
+fn partition(prims: &mut [PrimRef], split: &Split) -> (usize, [(Aabb, Aabb); 2]) {
+    let goes_left = |c: Vec3A| bin_of(c[split.axis], split.offset, split.scale, split.bins) < split.pos;
+    let mut sides = [(Aabb::EMPTY, Aabb::EMPTY); 2];
     let (mut i, mut j) = (0usize, prims.len());
     while i < j {
-        if goes_left(&prims[i]) {
+        let p = prims[i];
+        let c = p.center2();
+        if goes_left(c) {
+            sides[0].0.grow(&p.bounds());
+            sides[0].1.grow_point(c);
             i += 1;
         } else {
+            sides[1].0.grow(&p.bounds());
+            sides[1].1.grow_point(c);
             j -= 1;
             prims.swap(i, j);
         }
     }
-    i
+    (i, sides)
 }
 
 fn set_of(prims: &[PrimRef], start: usize) -> Set {
     let mut bounds = Aabb::EMPTY;
     let mut centroids = Aabb::EMPTY;
     for p in prims {
-        bounds.grow(&p.bounds);
+        bounds.grow(&p.bounds());
         centroids.grow_point(p.center2());
     }
-    Set {
-        start,
-        count: prims.len(),
-        bounds,
-        centroids,
-    }
+    Set { start, count: prims.len(), bounds, centroids }
 }
 
 /// Splits `set` (whose primitives are `prims`, indexed from `set.start`) in two: by SAH where
 /// possible, else at the object median.
-fn split_set(
-    set: &Set,
-    prims: &mut [PrimRef],
-    split: Option<Split>,
-    cfg: &BuildConfig,
-) -> (Set, Set) {
+fn split_set(set: &Set, prims: &mut [PrimRef], split: Option<Split>) -> (Set, Set) {
     let local = &mut prims[set.start..set.start + set.count];
-    let mid = match split {
-        Some(s) => partition(local, &s, cfg.bins),
-        None => 0,
-    };
-    let mid = if mid == 0 || mid == local.len() {
-        // No usable split (all centroids equal, or forced): halve in the current order.
-        local.len() / 2
-    } else {
-        mid
-    };
+    if let Some(s) = split {
+        let (mid, [(lb, lc), (rb, rc)]) = partition(local, &s);
+        if mid > 0 && mid < local.len() {
+            return (
+                Set { start: set.start, count: mid, bounds: lb, centroids: lc },
+                Set { start: set.start + mid, count: local.len() - mid, bounds: rb, centroids: rc },
+            );
+        }
+    }
+    // No usable split (all centroids equal, or forced): halve in the current order.
+    let mid = local.len() / 2;
     let (l, r) = local.split_at(mid);
     (set_of(l, set.start), set_of(r, set.start + mid))
 }
@@ -339,34 +350,15 @@ fn recurse(set: Set, prims: &mut [PrimRef], cfg: &BuildConfig, depth: usize) -> 
     recurse_at(set, prims, 0, cfg, depth)
 }
 
-fn recurse_at(
-    set: Set,
-    prims: &mut [PrimRef],
-    base: usize,
-    cfg: &BuildConfig,
-    depth: usize,
-) -> BuildNode {
-    let local = Set {
-        start: set.start - base,
-        ..set
-    };
-    let make_leaf = || BuildNode::Leaf {
-        start: set.start,
-        count: set.count,
-    };
+fn recurse_at(set: Set, prims: &mut [PrimRef], base: usize, cfg: &BuildConfig, depth: usize) -> BuildNode {
+    let local = Set { start: set.start - base, ..set };
+    let make_leaf = || BuildNode::Leaf { start: set.start, count: set.count };
     if set.count <= cfg.min_leaf {
         return make_leaf();
     }
     let median = depth >= MEDIAN_DEPTH;
-    let own_split = if median {
-        None
-    } else {
-        find_split(
-            &prims[local.start..local.start + local.count],
-            &set.centroids,
-            cfg,
-        )
-    };
+    let own_split =
+        if median { None } else { find_split(&prims[local.start..local.start + local.count], &set.centroids, cfg) };
     if set.count <= cfg.max_leaf {
         let area = set.bounds.half_area();
         let leaf_cost = cfg.intersection_cost * blocks(set.count) * area;
@@ -386,12 +378,7 @@ fn recurse_at(
             .iter()
             .enumerate()
             .filter(|(_, (s, _))| s.count > cfg.min_leaf)
-            .max_by(|a, b| {
-                a.1.0
-                    .bounds
-                    .half_area()
-                    .total_cmp(&b.1.0.bounds.half_area())
-            })
+            .max_by(|a, b| a.1.0.bounds.half_area().total_cmp(&b.1.0.bounds.half_area()))
             .map(|(i, _)| i);
         let Some(i) = pick else { break };
         let (s, known) = children.swap_remove(i);
@@ -400,7 +387,7 @@ fn recurse_at(
             None if median => None,
             None => find_split(&prims[s.start..s.start + s.count], &s.centroids, cfg),
         };
-        let (l, r) = split_set(&s, prims, split, cfg);
+        let (l, r) = split_set(&s, prims, split);
         children.push((l, None));
         children.push((r, None));
     }
@@ -413,20 +400,11 @@ fn recurse_at(
     for s in &sets {
         let (_, tail) = rest.split_at_mut(s.start - offset);
         let (piece, tail) = tail.split_at_mut(s.count);
-        pieces.push((
-            Set {
-                start: s.start + base,
-                ..*s
-            },
-            piece,
-            s.start + base,
-        ));
+        pieces.push((Set { start: s.start + base, ..*s }, piece, s.start + base));
         rest = tail;
         offset = s.start + s.count;
     }
-    let build_child = |(s, piece, b): (Set, &mut [PrimRef], usize)| {
-        (s.bounds, recurse_at(s, piece, b, cfg, depth + 1))
-    };
+    let build_child = |(s, piece, b): (Set, &mut [PrimRef], usize)| (s.bounds, recurse_at(s, piece, b, cfg, depth + 1));
     let built: Vec<(Aabb, BuildNode)> = if set.count >= cfg.parallel_threshold {
         pieces.into_par_iter().map(build_child).collect()
     } else {
@@ -443,13 +421,7 @@ mod tests {
         (0..n)
             .map(|i| {
                 let x = i as f32;
-                PrimRef {
-                    bounds: Aabb {
-                        lo: Vec3A::new(x, 0.0, 0.0),
-                        hi: Vec3A::new(x + 0.5, 1.0, 1.0),
-                    },
-                    id: i as u32,
-                }
+                PrimRef::new(Aabb { lo: Vec3A::new(x, 0.0, 0.0), hi: Vec3A::new(x + 0.5, 1.0, 1.0) }, i as u32)
             })
             .collect()
     }
@@ -459,10 +431,9 @@ mod tests {
             BuildNode::Leaf { start, count } => {
                 assert!(*count >= 1 && *count <= MAX_LEAF_BLOCKS * BLOCK);
                 for p in &prims[*start..start + count] {
-                    assert!(
-                        bounds.lo.cmple(p.bounds.lo).all() && p.bounds.hi.cmple(bounds.hi).all()
-                    );
-                    seen.push(p.id);
+                    let pb = p.bounds();
+                    assert!(bounds.lo.cmple(pb.lo).all() && pb.hi.cmple(bounds.hi).all());
+                    seen.push(p.id());
                 }
             }
             BuildNode::Inner { children } => {
@@ -488,15 +459,8 @@ mod tests {
 
     #[test]
     fn identical_centroids_still_split() {
-        let mut prims: Vec<PrimRef> = (0..1000)
-            .map(|i| PrimRef {
-                bounds: Aabb {
-                    lo: Vec3A::ZERO,
-                    hi: Vec3A::ONE,
-                },
-                id: i,
-            })
-            .collect();
+        let mut prims: Vec<PrimRef> =
+            (0..1000).map(|i| PrimRef::new(Aabb { lo: Vec3A::ZERO, hi: Vec3A::ONE }, i)).collect();
         let (b, root) = build(&mut prims, &BuildConfig::default()).unwrap();
         let mut seen = Vec::new();
         check(&root, &prims, &mut seen, &b);

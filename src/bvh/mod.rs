@@ -75,19 +75,11 @@ impl Bvh {
             .par_iter()
             .zip(offsets.par_iter())
             .flat_map_iter(|(m, &off)| {
-                (0..m.triangle_count())
-                    .filter(|&i| m.is_hittable(i))
-                    .map(move |i| {
-                        let [a, b, c] = m.triangle(i);
-                        let (a, b, c) = (Vec3A::from(a), Vec3A::from(b), Vec3A::from(c));
-                        PrimRef {
-                            bounds: Aabb {
-                                lo: a.min(b).min(c),
-                                hi: a.max(b).max(c),
-                            },
-                            id: (off + i) as u32,
-                        }
-                    })
+                (0..m.triangle_count()).filter(|&i| m.is_hittable(i)).map(move |i| {
+                    let [a, b, c] = m.triangle(i);
+                    let (a, b, c) = (Vec3A::from(a), Vec3A::from(b), Vec3A::from(c));
+                    PrimRef::new(Aabb { lo: a.min(b).min(c), hi: a.max(b).max(c) }, (off + i) as u32)
+                })
             })
             .collect();
         let skipped = total - prims.len();
@@ -96,40 +88,42 @@ impl Bvh {
         }
         let tree = build::build(&mut prims, cfg);
 
-        // Flatten depth-first into one node array and one block array.
-        let mut flat = Flattener {
-            nodes: Vec::new(),
-            blocks: Vec::new(),
-            prims: &prims,
-            meshes,
-            offsets: &offsets,
-        };
+        // Flatten depth-first: nodes and block ranges serially (cheap), then the triangle blocks
+        // of all leaves in parallel (each gathers scattered vertices, the costly part).
+        let mut nodes = Vec::new();
+        let mut leaves = Vec::new();
         let (root, bounds) = match &tree {
             None => (EMPTY, None),
-            Some((b, node)) => (flat.emit(node), Some((Vec3::from(b.lo), Vec3::from(b.hi)))),
+            Some((b, node)) => {
+                let mut blocks = 0usize;
+                let r = layout(node, &mut nodes, &mut leaves, &mut blocks);
+                (r, Some((Vec3::from(b.lo), Vec3::from(b.hi))))
+            }
         };
-        let Flattener { nodes, blocks, .. } = flat;
-        let mut bvh = Bvh {
-            nodes,
-            blocks,
-            root,
-            bounds,
-            stats: BuildStats::default(),
-        };
+        let prims_ref = &prims;
+        let blocks: Vec<TriBlock> = leaves
+            .par_iter()
+            .flat_map_iter(|&(start, count)| {
+                prims_ref[start..start + count].chunks(BLOCK).map(|chunk| {
+                    let mut tris = [(0u32, 0u32, [Vec3::ZERO; 3]); BLOCK];
+                    for (slot, p) in tris.iter_mut().zip(chunk) {
+                        let id = p.id() as usize;
+                        let g = offsets.partition_point(|&o| o <= id) - 1;
+                        let local = id - offsets[g];
+                        *slot = (g as u32, local as u32, meshes[g].triangle(local));
+                    }
+                    TriBlock::new(&tris[..chunk.len()])
+                })
+            })
+            .collect();
+        let mut bvh = Bvh { nodes, blocks, root, bounds, stats: BuildStats::default() };
         let build_ms = start.elapsed().as_secs_f64() * 1e3;
         bvh.stats = bvh.compute_stats(tree.as_ref().map(|t| &t.1), prims.len(), skipped, build_ms);
         Ok(bvh)
     }
 
-    fn compute_stats(
-        &self,
-        tree: Option<&BuildNode>,
-        triangles: usize,
-        skipped: usize,
-        build_ms: f64,
-    ) -> BuildStats {
-        let bytes =
-            self.nodes.len() * size_of::<Node>() + self.blocks.len() * size_of::<TriBlock>();
+    fn compute_stats(&self, tree: Option<&BuildNode>, triangles: usize, skipped: usize, build_ms: f64) -> BuildStats {
+        let bytes = self.nodes.len() * size_of::<Node>() + self.blocks.len() * size_of::<TriBlock>();
         let mut s = BuildStats {
             build_ms,
             triangles,
@@ -137,31 +131,16 @@ impl Bvh {
             inner_nodes: self.nodes.len(),
             blocks: self.blocks.len(),
             bytes,
-            bytes_per_triangle: if triangles > 0 {
-                bytes as f64 / triangles as f64
-            } else {
-                0.0
-            },
+            bytes_per_triangle: if triangles > 0 { bytes as f64 / triangles as f64 } else { 0.0 },
             ..Default::default()
         };
         if let (Some(tree), Some((lo, hi))) = (tree, self.bounds) {
-            let root_area = Aabb {
-                lo: lo.into(),
-                hi: hi.into(),
-            }
-            .half_area() as f64;
+            let root_area = Aabb { lo: lo.into(), hi: hi.into() }.half_area() as f64;
             let root_area = if root_area > 0.0 { root_area } else { 1.0 };
             let mut sah = 0.0f64;
             let mut leaves = 0usize;
             let mut depth = 0usize;
-            let mut stack = vec![(
-                tree,
-                Aabb {
-                    lo: lo.into(),
-                    hi: hi.into(),
-                },
-                0usize,
-            )];
+            let mut stack = vec![(tree, Aabb { lo: lo.into(), hi: hi.into() }, 0usize)];
             while let Some((n, b, d)) = stack.pop() {
                 depth = depth.max(d);
                 match n {
@@ -183,43 +162,25 @@ impl Bvh {
     }
 }
 
-struct Flattener<'a> {
-    nodes: Vec<Node>,
-    blocks: Vec<TriBlock>,
-    prims: &'a [PrimRef],
-    meshes: &'a [TriangleMesh],
-    offsets: &'a [usize],
-}
-
-impl Flattener<'_> {
-    /// Appends `node` and returns the child reference naming it.
-    fn emit(&mut self, node: &BuildNode) -> u32 {
-        match node {
-            BuildNode::Leaf { start, count } => {
-                let first = self.blocks.len();
-                for chunk in self.prims[*start..start + count].chunks(BLOCK) {
-                    let tris: Vec<(u32, u32, [Vec3; 3])> = chunk
-                        .iter()
-                        .map(|p| {
-                            let id = p.id as usize;
-                            let g = self.offsets.partition_point(|&o| o <= id) - 1;
-                            let local = id - self.offsets[g];
-                            (g as u32, local as u32, self.meshes[g].triangle(local))
-                        })
-                        .collect();
-                    self.blocks.push(TriBlock::new(&tris));
-                }
-                leaf_ref(first, self.blocks.len() - first)
+/// Appends `node` depth-first to `nodes`, records its leaves' primitive ranges in order, and
+/// returns the child reference naming it. Leaf blocks are numbered in the same order.
+fn layout(node: &BuildNode, nodes: &mut Vec<Node>, leaves: &mut Vec<(usize, usize)>, blocks: &mut usize) -> u32 {
+    match node {
+        BuildNode::Leaf { start, count } => {
+            let first = *blocks;
+            let n = count.div_ceil(BLOCK);
+            *blocks += n;
+            leaves.push((*start, *count));
+            leaf_ref(first, n)
+        }
+        BuildNode::Inner { children } => {
+            let index = nodes.len();
+            nodes.push(Node::default());
+            for (i, (b, child)) in children.iter().enumerate() {
+                let r = layout(child, nodes, leaves, blocks);
+                nodes[index].set(i, r, b.lo.into(), b.hi.into());
             }
-            BuildNode::Inner { children } => {
-                let index = self.nodes.len();
-                self.nodes.push(Node::default());
-                for (i, (b, child)) in children.iter().enumerate() {
-                    let r = self.emit(child);
-                    self.nodes[index].set(i, r, b.lo.into(), b.hi.into());
-                }
-                index as u32
-            }
+            index as u32
         }
     }
 }

@@ -26,10 +26,7 @@ impl Default for Node {
     fn default() -> Self {
         let inv = [f32::INFINITY; WIDTH];
         let neg = [f32::NEG_INFINITY; WIDTH];
-        Self {
-            bounds: [inv, neg, inv, neg, inv, neg],
-            child: [EMPTY; WIDTH],
-        }
+        Self { bounds: [inv, neg, inv, neg, inv, neg], child: [EMPTY; WIDTH] }
     }
 }
 

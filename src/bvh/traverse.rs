@@ -36,11 +36,7 @@ const STACK: usize = (MEDIAN_DEPTH + 33) * (WIDTH - 1) + 1;
 
 #[inline(always)]
 fn safe_rcp(d: f32) -> f32 {
-    let d = if d.abs() < MIN_RCP_INPUT {
-        MIN_RCP_INPUT.copysign(d)
-    } else {
-        d
-    };
+    let d = if d.abs() < MIN_RCP_INPUT { MIN_RCP_INPUT.copysign(d) } else { d };
     1.0 / d
 }
 
@@ -89,11 +85,7 @@ struct Stack {
 impl Stack {
     #[inline(always)]
     fn new(root: u32) -> Self {
-        let mut s = Self {
-            node: [0; STACK],
-            dist: [0.0; STACK],
-            len: 1,
-        };
+        let mut s = Self { node: [0; STACK], dist: [0.0; STACK], len: 1 };
         s.node[0] = root;
         s.dist[0] = f32::NEG_INFINITY;
         s
@@ -135,14 +127,7 @@ impl Bvh {
     pub fn hit_record(&self, h: &LeafHit) -> Hit {
         let b = &self.blocks[h.block as usize];
         let lane = h.lane as usize;
-        Hit {
-            t: h.t,
-            u: h.u,
-            v: h.v,
-            ng: b.ng(lane),
-            prim_id: b.prim[lane],
-            geom_id: b.geom[lane],
-        }
+        Hit { t: h.t, u: h.u, v: h.v, ng: b.ng(lane), prim_id: b.prim[lane], geom_id: b.geom[lane] }
     }
 
     /// Closest hit (`ANY = false`) or first hit found (`ANY = true`) of one ray.
@@ -151,28 +136,12 @@ impl Bvh {
             return None;
         }
         let r4 = Ray4::new(ray.origin, ray.dir);
-        let rdir = Vec3::new(
-            safe_rcp(ray.dir.x),
-            safe_rcp(ray.dir.y),
-            safe_rcp(ray.dir.z),
-        );
+        let rdir = Vec3::new(safe_rcp(ray.dir.x), safe_rcp(ray.dir.y), safe_rcp(ray.dir.z));
         let ordir = ray.origin * rdir;
-        let rd = [
-            f32x8::splat(rdir.x),
-            f32x8::splat(rdir.y),
-            f32x8::splat(rdir.z),
-        ];
-        let od = [
-            f32x8::splat(ordir.x),
-            f32x8::splat(ordir.y),
-            f32x8::splat(ordir.z),
-        ];
+        let rd = [f32x8::splat(rdir.x), f32x8::splat(rdir.y), f32x8::splat(rdir.z)];
+        let od = [f32x8::splat(ordir.x), f32x8::splat(ordir.y), f32x8::splat(ordir.z)];
         // Row of the near plane per axis: the box minimum where the direction is positive.
-        let near = [
-            (rdir.x < 0.0) as usize,
-            2 + (rdir.y < 0.0) as usize,
-            4 + (rdir.z < 0.0) as usize,
-        ];
+        let near = [(rdir.x < 0.0) as usize, 2 + (rdir.y < 0.0) as usize, 4 + (rdir.z < 0.0) as usize];
         let far = [near[0] ^ 1, near[1] ^ 1, near[2] ^ 1];
         let tnear = f32x8::splat(ray.tnear);
         let pad = f32x8::splat(WIDEN * ordir.abs().max_element());
@@ -190,17 +159,9 @@ impl Bvh {
                 if is_leaf(cur) {
                     let (start, count) = leaf_blocks(cur);
                     for bi in start..start + count {
-                        if let Some((lane, t, u, v)) =
-                            triangle::intersect1(&self.blocks[bi], &r4, ray.tnear, tfar)
-                        {
+                        if let Some((lane, t, u, v)) = triangle::intersect1(&self.blocks[bi], &r4, ray.tnear, tfar) {
                             tfar = t;
-                            best = Some(LeafHit {
-                                block: bi as u32,
-                                lane: lane as u32,
-                                t,
-                                u,
-                                v,
-                            });
+                            best = Some(LeafHit { block: bi as u32, lane: lane as u32, t, u, v });
                             if ANY {
                                 return best;
                             }
@@ -235,11 +196,7 @@ impl Bvh {
                 let i1 = mask.trailing_zeros() as usize;
                 mask &= mask - 1;
                 if mask == 0 {
-                    let (n, f) = if ANY || d[i0] <= d[i1] {
-                        (i0, i1)
-                    } else {
-                        (i1, i0)
-                    };
+                    let (n, f) = if ANY || d[i0] <= d[i1] { (i0, i1) } else { (i1, i0) };
                     stack.push(node.child[f], d[f]);
                     cur = node.child[n];
                     continue;
@@ -318,8 +275,7 @@ impl Bvh {
                             if blk.prim[lane] == u32::MAX {
                                 break;
                             }
-                            let (valid, t, u, v) =
-                                triangle::intersect_packet(blk, lane, &rk, tfar, active);
+                            let (valid, t, u, v) = triangle::intersect_packet(blk, lane, &rk, tfar, active);
                             let mut bits = valid.to_bitmask();
                             if bits == 0 {
                                 continue;

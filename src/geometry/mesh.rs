@@ -18,54 +18,30 @@ pub struct TriangleMesh {
 
 impl TriangleMesh {
     /// Makes a mesh, checking that every index refers to a vertex.
-    pub fn new(
-        name: impl Into<String>,
-        positions: Vec<Vec3>,
-        indices: Vec<[u32; 3]>,
-    ) -> Result<Self> {
+    pub fn new(name: impl Into<String>, positions: Vec<Vec3>, indices: Vec<[u32; 3]>) -> Result<Self> {
         if indices.len() >= u32::MAX as usize {
             return Err(Error::TooManyTriangles(indices.len()));
         }
         for (triangle, tri) in indices.iter().enumerate() {
             for &index in tri {
                 if index as usize >= positions.len() {
-                    return Err(Error::IndexOutOfRange {
-                        triangle,
-                        index,
-                        vertex_count: positions.len(),
-                    });
+                    return Err(Error::IndexOutOfRange { triangle, index, vertex_count: positions.len() });
                 }
             }
         }
-        Ok(Self {
-            name: name.into(),
-            positions,
-            indices,
-        })
+        Ok(Self { name: name.into(), positions, indices })
     }
 
     /// Makes a mesh from flat slices: `positions` as x, y, z triples and `indices` as triples.
-    pub fn from_slices(
-        name: impl Into<String>,
-        positions: &[f32],
-        indices: &[u32],
-    ) -> Result<Self> {
+    pub fn from_slices(name: impl Into<String>, positions: &[f32], indices: &[u32]) -> Result<Self> {
         if positions.len() % 3 != 0 {
-            return Err(Error::RaggedPositions {
-                len: positions.len(),
-            });
+            return Err(Error::RaggedPositions { len: positions.len() });
         }
         if indices.len() % 3 != 0 {
             return Err(Error::RaggedIndices { len: indices.len() });
         }
-        let p = positions
-            .chunks_exact(3)
-            .map(|c| Vec3::new(c[0], c[1], c[2]))
-            .collect();
-        let i = indices
-            .chunks_exact(3)
-            .map(|c| [c[0], c[1], c[2]])
-            .collect();
+        let p = positions.chunks_exact(3).map(|c| Vec3::new(c[0], c[1], c[2])).collect();
+        let i = indices.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
         Self::new(name, p, i)
     }
 
@@ -84,11 +60,7 @@ impl TriangleMesh {
     /// The three corners of triangle `i`.
     pub fn triangle(&self, i: usize) -> [Vec3; 3] {
         let [a, b, c] = self.indices[i];
-        [
-            self.positions[a as usize],
-            self.positions[b as usize],
-            self.positions[c as usize],
-        ]
+        [self.positions[a as usize], self.positions[b as usize], self.positions[c as usize]]
     }
 
     /// Whether triangle `i` can ever be hit: finite corners and a non-zero geometric normal.
@@ -123,43 +95,17 @@ mod tests {
     #[test]
     fn rejects_bad_indices() {
         let e = TriangleMesh::from_slices("m", &[0.0; 9], &[0, 1, 3]).unwrap_err();
-        assert!(matches!(
-            e,
-            Error::IndexOutOfRange {
-                triangle: 0,
-                index: 3,
-                vertex_count: 3
-            }
-        ));
+        assert!(matches!(e, Error::IndexOutOfRange { triangle: 0, index: 3, vertex_count: 3 }));
         assert!(matches!(
             TriangleMesh::from_slices("m", &[0.0; 8], &[0, 1, 2]),
             Err(Error::RaggedPositions { len: 8 })
         ));
-        assert!(matches!(
-            TriangleMesh::from_slices("m", &[0.0; 9], &[0, 1]),
-            Err(Error::RaggedIndices { len: 2 })
-        ));
+        assert!(matches!(TriangleMesh::from_slices("m", &[0.0; 9], &[0, 1]), Err(Error::RaggedIndices { len: 2 })));
     }
 
     #[test]
     fn hittable() {
-        let p = [
-            0.0,
-            0.0,
-            0.0,
-            1.0,
-            0.0,
-            0.0,
-            0.0,
-            1.0,
-            0.0,
-            2.0,
-            0.0,
-            0.0,
-            f32::NAN,
-            0.0,
-            0.0,
-        ];
+        let p = [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 2.0, 0.0, 0.0, f32::NAN, 0.0, 0.0];
         let m = TriangleMesh::from_slices("m", &p, &[0, 1, 2, 0, 1, 3, 0, 1, 4]).unwrap();
         assert!(m.is_hittable(0));
         assert!(!m.is_hittable(1), "collinear");

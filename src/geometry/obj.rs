@@ -14,17 +14,10 @@ use crate::error::{Error, Result};
 /// faces gives an empty list (an empty scene, which every ray misses).
 pub fn load_obj(path: impl AsRef<Path>) -> Result<Vec<TriangleMesh>> {
     let path = path.as_ref();
-    let opts = tobj::LoadOptions {
-        triangulate: true,
-        single_index: false,
-        ignore_points: true,
-        ignore_lines: true,
-    };
+    let opts = tobj::LoadOptions { triangulate: true, single_index: false, ignore_points: true, ignore_lines: true };
     // Material libraries are not needed for ray queries; a missing .mtl is not an error.
-    let (models, _materials) = tobj::load_obj(path, &opts).map_err(|source| Error::Obj {
-        path: path.to_owned(),
-        source,
-    })?;
+    let (models, _materials) =
+        tobj::load_obj(path, &opts).map_err(|source| Error::Obj { path: path.to_owned(), source })?;
     let mut meshes = Vec::with_capacity(models.len());
     for model in models {
         let m = model.mesh;
@@ -32,25 +25,13 @@ pub fn load_obj(path: impl AsRef<Path>) -> Result<Vec<TriangleMesh>> {
             continue;
         }
         if m.positions.len() % 3 != 0 {
-            return Err(Error::RaggedPositions {
-                len: m.positions.len(),
-            });
+            return Err(Error::RaggedPositions { len: m.positions.len() });
         }
-        let positions: Vec<Vec3> = m
-            .positions
-            .chunks_exact(3)
-            .map(|c| Vec3::new(c[0], c[1], c[2]))
-            .collect();
+        let positions: Vec<Vec3> = m.positions.chunks_exact(3).map(|c| Vec3::new(c[0], c[1], c[2])).collect();
         if m.indices.len() % 3 != 0 {
-            return Err(Error::RaggedIndices {
-                len: m.indices.len(),
-            });
+            return Err(Error::RaggedIndices { len: m.indices.len() });
         }
-        let indices = m
-            .indices
-            .chunks_exact(3)
-            .map(|c| [c[0], c[1], c[2]])
-            .collect();
+        let indices = m.indices.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
         meshes.push(TriangleMesh::new(model.name, positions, indices)?);
     }
     Ok(meshes)
@@ -70,10 +51,7 @@ mod tests {
 
     #[test]
     fn quads_are_fan_triangulated_per_group() {
-        let p = write_tmp(
-            "quads.obj",
-            "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\ng a\nf 1 2 3 4\ng b\nf 1 2 5\n",
-        );
+        let p = write_tmp("quads.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\ng a\nf 1 2 3 4\ng b\nf 1 2 5\n");
         let meshes = load_obj(&p).unwrap();
         assert_eq!(meshes.len(), 2);
         assert_eq!(meshes[0].triangle_count(), 2);

@@ -79,33 +79,18 @@ impl Ray4 {
 }
 
 #[inline(always)]
-fn cross<T: Copy + core::ops::Mul<Output = T> + core::ops::Sub<Output = T>>(
-    a: [T; 3],
-    b: [T; 3],
-) -> [T; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
+fn cross<T: Copy + core::ops::Mul<Output = T> + core::ops::Sub<Output = T>>(a: [T; 3], b: [T; 3]) -> [T; 3] {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 }
 
 #[inline(always)]
-fn dot<T: Copy + core::ops::Mul<Output = T> + core::ops::Add<Output = T>>(
-    a: [T; 3],
-    b: [T; 3],
-) -> T {
+fn dot<T: Copy + core::ops::Mul<Output = T> + core::ops::Add<Output = T>>(a: [T; 3], b: [T; 3]) -> T {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
 /// The nearest hit of one ray among the triangles of a block, as `(lane, t, u, v)`.
 #[inline(always)]
-pub(crate) fn intersect1(
-    b: &TriBlock,
-    r: &Ray4,
-    tnear: f32,
-    tfar: f32,
-) -> Option<(usize, f32, f32, f32)> {
+pub(crate) fn intersect1(b: &TriBlock, r: &Ray4, tnear: f32, tfar: f32) -> Option<(usize, f32, f32, f32)> {
     let ld = |a: &[[f32; BLOCK]; 3]| [f32x4::new(a[0]), f32x4::new(a[1]), f32x4::new(a[2])];
     let (v0, e1, e2) = (ld(&b.v0), ld(&b.e1), ld(&b.e2));
     // Edge tests: the signs of U and V decide the hit, made independent of the winding by
@@ -125,17 +110,13 @@ pub(crate) fn intersect1(
     }
     // Depth test, scaled by |den| to avoid the division for rejected lanes.
     let tt = dot(ng, c) ^ sgn;
-    let valid = valid
-        & (abs_den * f32x4::splat(tnear)).simd_lt(tt)
-        & tt.simd_le(abs_den * f32x4::splat(tfar));
+    let valid = valid & (abs_den * f32x4::splat(tnear)).simd_lt(tt) & tt.simd_le(abs_den * f32x4::splat(tfar));
     let bits = valid.to_bitmask();
     if bits == 0 {
         return None;
     }
     let inv = f32x4::splat(1.0) / abs_den;
-    let t = valid
-        .select(tt * inv, f32x4::splat(f32::INFINITY))
-        .to_array();
+    let t = valid.select(tt * inv, f32x4::splat(f32::INFINITY)).to_array();
     // The nearest lane; among equal distances the lowest lane wins, as in Embree's select_min.
     let mut best = bits.trailing_zeros() as usize;
     for (lane, &tl) in t.iter().enumerate().skip(best + 1) {
@@ -158,20 +139,8 @@ pub(crate) struct RayK {
 /// Lanes of a packet that hit triangle `lane` of block `b` within `(tnear, tfar]`, with their
 /// `t`, `u` and `v`. Only lanes in `active` are reported.
 #[inline(always)]
-pub(crate) fn intersect_packet(
-    b: &TriBlock,
-    lane: usize,
-    r: &RayK,
-    tfar: Pf,
-    active: Pf,
-) -> (Pf, Pf, Pf, Pf) {
-    let s = |a: &[[f32; BLOCK]; 3]| {
-        [
-            Pf::splat(a[0][lane]),
-            Pf::splat(a[1][lane]),
-            Pf::splat(a[2][lane]),
-        ]
-    };
+pub(crate) fn intersect_packet(b: &TriBlock, lane: usize, r: &RayK, tfar: Pf, active: Pf) -> (Pf, Pf, Pf, Pf) {
+    let s = |a: &[[f32; BLOCK]; 3]| [Pf::splat(a[0][lane]), Pf::splat(a[1][lane]), Pf::splat(a[2][lane])];
     let (v0, e1, e2) = (s(&b.v0), s(&b.e1), s(&b.e2));
     let c = [v0[0] - r.o[0], v0[1] - r.o[1], v0[2] - r.o[2]];
     let rr = cross(c, r.d);
@@ -182,8 +151,7 @@ pub(crate) fn intersect_packet(
     let u = dot(rr, e2) ^ sgn;
     let v = dot(rr, e1) ^ sgn;
     let zero = Pf::splat(0.0);
-    let valid =
-        active & den.simd_ne(zero) & u.simd_ge(zero) & v.simd_ge(zero) & (u + v).simd_le(abs_den);
+    let valid = active & den.simd_ne(zero) & u.simd_ge(zero) & v.simd_ge(zero) & (u + v).simd_le(abs_den);
     if valid.to_bitmask() == 0 {
         return (valid, zero, zero, zero);
     }
@@ -203,11 +171,7 @@ mod tests {
 
     #[test]
     fn barycentrics_and_normal_match_the_definition() {
-        let (a, b, c) = (
-            Vec3::new(0.0, 0.0, 0.0),
-            Vec3::new(2.0, 0.0, 0.0),
-            Vec3::new(0.0, 2.0, 0.0),
-        );
+        let (a, b, c) = (Vec3::new(0.0, 0.0, 0.0), Vec3::new(2.0, 0.0, 0.0), Vec3::new(0.0, 2.0, 0.0));
         let blk = block1(a, b, c);
         let o = Vec3::new(0.5, 0.25, 3.0);
         let d = Vec3::new(0.0, 0.0, -1.5);
@@ -221,17 +185,10 @@ mod tests {
 
     #[test]
     fn depth_test_is_half_open() {
-        let blk = block1(
-            Vec3::new(-1.0, -1.0, 0.0),
-            Vec3::new(1.0, -1.0, 0.0),
-            Vec3::new(0.0, 1.0, 0.0),
-        );
+        let blk = block1(Vec3::new(-1.0, -1.0, 0.0), Vec3::new(1.0, -1.0, 0.0), Vec3::new(0.0, 1.0, 0.0));
         let r = Ray4::new(Vec3::new(0.0, 0.0, 1.0), Vec3::new(0.0, 0.0, -1.0));
         assert!(intersect1(&blk, &r, 0.0, 1.0).is_some(), "t == tfar hits");
-        assert!(
-            intersect1(&blk, &r, 1.0, 2.0).is_none(),
-            "t == tnear misses"
-        );
+        assert!(intersect1(&blk, &r, 1.0, 2.0).is_none(), "t == tnear misses");
         assert!(intersect1(&blk, &r, 0.0, 0.999).is_none());
         // Both windings hit.
         let back = Ray4::new(Vec3::new(0.0, 0.0, -1.0), Vec3::new(0.0, 0.0, 1.0));
@@ -247,11 +204,7 @@ mod tests {
 
     #[test]
     fn packet_form_matches_single_form() {
-        let blk = block1(
-            Vec3::new(-1.0, -1.0, 0.0),
-            Vec3::new(1.0, -1.0, 0.0),
-            Vec3::new(0.0, 1.0, 0.0),
-        );
+        let blk = block1(Vec3::new(-1.0, -1.0, 0.0), Vec3::new(1.0, -1.0, 0.0), Vec3::new(0.0, 1.0, 0.0));
         let mut o = [[0.0f32; PACKET_WIDTH]; 3];
         let mut d = [[0.0f32; PACKET_WIDTH]; 3];
         for i in 0..PACKET_WIDTH {
@@ -271,10 +224,7 @@ mod tests {
         let (bits, t) = (valid.to_bitmask(), t.to_array());
         let mut hits = 0;
         for i in 0..PACKET_WIDTH {
-            let single = Ray4::new(
-                Vec3::new(o[0][i], o[1][i], o[2][i]),
-                Vec3::new(d[0][i], d[1][i], d[2][i]),
-            );
+            let single = Ray4::new(Vec3::new(o[0][i], o[1][i], o[2][i]), Vec3::new(d[0][i], d[1][i], d[2][i]));
             let s = intersect1(&blk, &single, 0.0, f32::INFINITY);
             assert_eq!(s.is_some(), bits & (1 << i) != 0, "lane {i}");
             if let Some((_, ts, _, _)) = s {
@@ -282,9 +232,6 @@ mod tests {
                 hits += 1;
             }
         }
-        assert!(
-            hits > 3 && hits < PACKET_WIDTH,
-            "the test rays should both hit and miss: {hits}"
-        );
+        assert!(hits > 3 && hits < PACKET_WIDTH, "the test rays should both hit and miss: {hits}");
     }
 }

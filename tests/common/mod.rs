@@ -41,16 +41,12 @@ pub fn random_rays(seed: u64, n: usize) -> Vec<Ray> {
 
 /// A shared benchmark scene, if this checkout has `../shared/scenes` beside it.
 pub fn shared_scene(rel: &str) -> Option<PathBuf> {
-    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/scenes")
-        .join(rel);
+    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/scenes").join(rel);
     p.exists().then_some(p)
 }
 
 pub fn data(rel: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("data")
-        .join(rel)
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data").join(rel)
 }
 
 /// Two closest-hit answers agree: same hit/miss; same primitive, or a different one at the same
@@ -62,10 +58,7 @@ pub fn assert_same_hit(a: Option<Hit>, b: Option<Hit>, rel: f32, what: &str) {
             let tol = rel * a.t.abs().max(b.t.abs()).max(f32::MIN_POSITIVE);
             assert!((a.t - b.t).abs() <= tol, "{what}: t {} vs {}", a.t, b.t);
             if (a.geom_id, a.prim_id) != (b.geom_id, b.prim_id) {
-                assert_eq!(
-                    a.t, b.t,
-                    "{what}: different primitives at different distances: {a:?} vs {b:?}"
-                );
+                assert_eq!(a.t, b.t, "{what}: different primitives at different distances: {a:?} vs {b:?}");
             }
         }
         _ => panic!("{what}: hit/miss differ: {a:?} vs {b:?}"),
