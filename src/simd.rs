@@ -21,6 +21,26 @@ pub(crate) const fn low_bits(n: usize) -> u32 {
     if n >= 32 { u32::MAX } else { (1u32 << n) - 1 }
 }
 
+/// Smallest lane of a packet vector, by pairwise halving (log₂ 16 = 4 dependent steps instead of
+/// 16). NaN lanes must not occur (callers select +inf for inactive lanes).
+#[inline(always)]
+pub(crate) fn hmin(x: Pf) -> f32 {
+    let a = x.to_array();
+    let (lo, hi) = a.split_at(8);
+    let m = f32x8::new(lo.try_into().unwrap_or([0.0; 8])).fast_min(f32x8::new(hi.try_into().unwrap_or([0.0; 8])));
+    let m = m.to_array();
+    let (lo, hi) = m.split_at(4);
+    let m = f32x4::new(lo.try_into().unwrap_or([0.0; 4])).fast_min(f32x4::new(hi.try_into().unwrap_or([0.0; 4])));
+    let m = m.to_array();
+    m[0].min(m[1]).min(m[2].min(m[3]))
+}
+
+/// Largest lane of a packet vector (see [`hmin`]).
+#[inline(always)]
+pub(crate) fn hmax(x: Pf) -> f32 {
+    -hmin(-x)
+}
+
 /// Truncates four floats to integers in one instruction (`cvttps2dq`). Out-of-range and NaN lanes
 /// give `i32::MIN`, so callers clamp the inputs first.
 #[inline(always)]

@@ -15,6 +15,8 @@
 //! `pad = 2⁻²⁰·max|org · rdir|` per ray: a bound on both roundings, at one fused multiply-add per
 //! node. Without it, 1 in 2,000 random rays at an offset of 1e5 missed a triangle brute force hit.
 
+use std::cell::RefCell;
+
 use glam::Vec3;
 
 use super::Bvh;
@@ -75,7 +77,8 @@ impl Default for PacketHits {
     }
 }
 
-/// Fixed-size traversal stack; no kernel allocates.
+/// Fixed-size traversal stack; no kernel allocates. Each thread keeps one (see [`with_stack`]):
+/// zero-filling 4 KB on every ray cost more than a tenth of a primary ray's traversal.
 struct Stack {
     node: [u32; STACK],
     dist: [f32; STACK],
@@ -83,12 +86,13 @@ struct Stack {
 }
 
 impl Stack {
+    const EMPTY: Stack = Stack { node: [0; STACK], dist: [0.0; STACK], len: 0 };
+
     #[inline(always)]
-    fn new(root: u32) -> Self {
-        let mut s = Self { node: [0; STACK], dist: [0.0; STACK], len: 1 };
-        s.node[0] = root;
-        s.dist[0] = f32::NEG_INFINITY;
-        s
+    fn reset(&mut self, root: u32) {
+        self.node[0] = root;
+        self.dist[0] = f32::NEG_INFINITY;
+        self.len = 1;
     }
 
     #[inline(always)]
@@ -121,6 +125,27 @@ impl Stack {
     }
 }
 
+thread_local! {
+    static STACK_TLS: RefCell<Stack> = const { RefCell::new(Stack::EMPTY) };
+}
+
+/// Runs `f` with this thread's traversal stack, reset to hold `root` (a fresh one if the thread's
+/// stack is already in use, which only re-entrant use could cause).
+#[inline(always)]
+fn with_stack<R>(root: u32, f: impl FnOnce(&mut Stack) -> R) -> R {
+    STACK_TLS.with(|cell| match cell.try_borrow_mut() {
+        Ok(mut s) => {
+            s.reset(root);
+            f(&mut s)
+        }
+        Err(_) => {
+            let mut s = Box::new(Stack::EMPTY);
+            s.reset(root);
+            f(&mut s)
+        }
+    })
+}
+
 impl Bvh {
     /// Turns a leaf hit into the public hit record.
     #[inline]
@@ -135,6 +160,11 @@ impl Bvh {
         if !ray.is_valid() || self.root == EMPTY {
             return None;
         }
+        with_stack(self.root, |stack| self.trace1_with::<ANY>(ray, stack))
+    }
+
+    #[inline(always)]
+    fn trace1_with<const ANY: bool>(&self, ray: &Ray, stack: &mut Stack) -> Option<LeafHit> {
         let r4 = Ray4::new(ray.origin, ray.dir);
         let rdir = Vec3::new(safe_rcp(ray.dir.x), safe_rcp(ray.dir.y), safe_rcp(ray.dir.z));
         let ordir = ray.origin * rdir;
@@ -148,7 +178,6 @@ impl Bvh {
         let widen = f32x8::splat(1.0 + WIDEN);
         let mut tfar = ray.tfar;
         let mut best = None;
-        let mut stack = Stack::new(self.root);
 
         'pop: while let Some((mut cur, dist)) = stack.pop() {
             // Skip subtrees entered beyond the closest hit so far.
@@ -225,6 +254,11 @@ impl Bvh {
     /// Closest hits (`ANY = false`) or occlusion (`ANY = true`) of the active lanes of a packet.
     /// Invalid rays in active lanes are answered with a miss.
     pub fn trace_packet<const ANY: bool>(&self, p: &RayPacket) -> PacketHits {
+        with_stack(self.root, |stack| self.trace_packet_with::<ANY>(p, stack))
+    }
+
+    #[inline(always)]
+    fn trace_packet_with<const ANY: bool>(&self, p: &RayPacket, stack: &mut Stack) -> PacketHits {
         let mut out = PacketHits::default();
         let mut live = 0u32;
         for lane in 0..PACKET_WIDTH {
@@ -258,7 +292,6 @@ impl Bvh {
         let mut tfar = Pf::new(tf_a);
         let mut tfar_max = hmax(tfar);
         let rk = RayK { o, d, tnear };
-        let mut stack = Stack::new(self.root);
         let inf = Pf::splat(f32::INFINITY);
 
         'pop: while let Some((mut cur, dist)) = stack.pop() {
@@ -355,14 +388,4 @@ impl Bvh {
         }
         out
     }
-}
-
-#[inline(always)]
-fn hmin(x: Pf) -> f32 {
-    x.to_array().into_iter().fold(f32::INFINITY, f32::min)
-}
-
-#[inline(always)]
-fn hmax(x: Pf) -> f32 {
-    x.to_array().into_iter().fold(f32::NEG_INFINITY, f32::max)
 }
