@@ -56,6 +56,7 @@ pub fn uv_sphere(center: Vec3, radius: f32, stacks: u32, slices: u32) -> Triangl
 /// tessellated with `stacks × slices`. `levels = 3`, 12 × 24 gives 820 spheres, 433k triangles.
 pub fn sphereflake(levels: u32, stacks: u32, slices: u32) -> TriangleMesh {
     let (mut p, mut idx) = (Vec::new(), Vec::new());
+    #[allow(clippy::too_many_arguments)]
     fn grow(
         p: &mut Vec<Vec3>,
         idx: &mut Vec<[u32; 3]>,

@@ -1,4 +1,5 @@
 //! Packet and stream queries give the single-ray answers, serially and in parallel.
+#![allow(clippy::needless_range_loop)]
 
 mod common;
 

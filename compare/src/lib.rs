@@ -8,6 +8,8 @@
 //! - [`report`]: table, Markdown, JSON, charts, pictures
 //! - [`rayfile`]: the shared ray and hit file formats
 #![deny(unsafe_code)]
+// SoA buffers are indexed by one lane index across several arrays.
+#![allow(clippy::needless_range_loop)]
 
 pub mod accuracy;
 pub mod embree;

@@ -30,7 +30,10 @@ pub struct SceneSpec {
 }
 
 /// The cameras and lights of BENCHMARKING.md: name, folder/file, eye, look-at, light.
-const SHARED: [(&str, &str, [f32; 3], [f32; 3], [f32; 3]); 7] = [
+/// `(name, file, eye, look_at, light)`.
+type Shared = (&'static str, &'static str, [f32; 3], [f32; 3], [f32; 3]);
+
+const SHARED: [Shared; 7] = [
     ("cornell_box", "cornell_box/cornell_box.obj", [278.0, 273.0, -450.0], [278.0, 273.0, 0.0], [278.0, 540.0, 279.0]),
     ("teapot", "teapot/teapot.obj", [0.217, 2.5, 6.0], [0.217, 1.4, 0.0], [3.0, 7.0, 5.0]),
     ("bunny", "bunny/bunny.obj", [-0.017, 0.13, 0.17], [-0.017, 0.10, 0.0], [0.1, 0.3, 0.2]),

@@ -34,10 +34,10 @@ impl TriangleMesh {
 
     /// Makes a mesh from flat slices: `positions` as x, y, z triples and `indices` as triples.
     pub fn from_slices(name: impl Into<String>, positions: &[f32], indices: &[u32]) -> Result<Self> {
-        if positions.len() % 3 != 0 {
+        if !positions.len().is_multiple_of(3) {
             return Err(Error::RaggedPositions { len: positions.len() });
         }
-        if indices.len() % 3 != 0 {
+        if !indices.len().is_multiple_of(3) {
             return Err(Error::RaggedIndices { len: indices.len() });
         }
         let p = positions.chunks_exact(3).map(|c| Vec3::new(c[0], c[1], c[2])).collect();

@@ -24,11 +24,11 @@ pub fn load_obj(path: impl AsRef<Path>) -> Result<Vec<TriangleMesh>> {
         if m.indices.is_empty() {
             continue;
         }
-        if m.positions.len() % 3 != 0 {
+        if !m.positions.len().is_multiple_of(3) {
             return Err(Error::RaggedPositions { len: m.positions.len() });
         }
         let positions: Vec<Vec3> = m.positions.chunks_exact(3).map(|c| Vec3::new(c[0], c[1], c[2])).collect();
-        if m.indices.len() % 3 != 0 {
+        if !m.indices.len().is_multiple_of(3) {
             return Err(Error::RaggedIndices { len: m.indices.len() });
         }
         let indices = m.indices.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
