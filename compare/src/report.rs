@@ -330,7 +330,7 @@ pub fn ratio_chart(path: &Path, r: &Report) -> anyhow::Result<()> {
     let names: Vec<&str> = r.scenes.iter().map(|s| s.name.as_str()).collect();
     let classes = ["primary", "shadow", "diffuse"];
     let colors = [RGBColor(66, 133, 244), RGBColor(52, 168, 83), RGBColor(234, 67, 53)];
-    let ymax = r.scenes.iter().flat_map(|s| s.classes.iter().map(|c| c.best_ratio)).fold(1.2f64, f64::max) * 1.15;
+    let ymax = r.scenes.iter().flat_map(|s| s.classes.iter().map(|c| c.best_ratio)).fold(1.2f64, f64::max) * 1.3;
     let root = BitMapBackend::new(path, (1200, 600)).into_drawing_area();
     root.fill(&WHITE)?;
     let n = names.len().max(1);
@@ -346,14 +346,16 @@ pub fn ratio_chart(path: &Path, r: &Report) -> anyhow::Result<()> {
     chart
         .configure_mesh()
         .disable_x_mesh()
-        .x_labels(n)
-        .x_label_formatter(&|x| {
-            let i = (x - 0.5).round() as usize;
-            names.get(i).map(|s| s.to_string()).unwrap_or_default()
-        })
+        .x_labels(0)
         .y_desc("ratio (higher is faster than Embree)")
         .label_style(("sans-serif", 15))
         .draw()?;
+    // Scene names centred under their groups of bars.
+    for (i, name) in names.iter().enumerate() {
+        let (px, py) = chart.backend_coord(&(i as f64 + 0.5, 0.0));
+        let half = (name.chars().count() as i32 * 7) / 2;
+        root.draw(&Text::new(name.to_string(), (px - half, py + 10), ("sans-serif", 14)))?;
+    }
     for (k, cl) in classes.iter().enumerate() {
         let bars: Vec<(f64, f64)> = r
             .scenes
@@ -373,6 +375,7 @@ pub fn ratio_chart(path: &Path, r: &Report) -> anyhow::Result<()> {
     chart.draw_series(LineSeries::new(vec![(0.0, 1.0), (n as f64, 1.0)], BLACK.stroke_width(2)))?;
     chart
         .configure_series_labels()
+        .position(SeriesLabelPosition::UpperLeft)
         .background_style(WHITE.mix(0.8))
         .border_style(BLACK)
         .label_font(("sans-serif", 15))

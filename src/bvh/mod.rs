@@ -71,17 +71,33 @@ impl Bvh {
         if total >= u32::MAX as usize {
             return Err(Error::TooManyTriangles(total));
         }
-        let mut prims: Vec<PrimRef> = meshes
-            .par_iter()
-            .zip(offsets.par_iter())
-            .flat_map_iter(|(m, &off)| {
-                (0..m.triangle_count()).filter(|&i| m.is_hittable(i)).map(move |i| {
-                    let [a, b, c] = m.triangle(i);
-                    let (a, b, c) = (Vec3A::from(a), Vec3A::from(b), Vec3A::from(c));
-                    PrimRef::new(Aabb { lo: a.min(b).min(c), hi: a.max(b).max(c) }, (off + i) as u32)
-                })
+        // Work items of at most 16k triangles, so that single-mesh scenes are spread over threads
+        // too; small scenes stay on the calling thread (waking the pool costs more than they do).
+        const PRIM_CHUNK: usize = 16 * 1024;
+        let items: Vec<(usize, usize, usize)> = meshes
+            .iter()
+            .enumerate()
+            .flat_map(|(g, m)| {
+                (0..m.triangle_count())
+                    .step_by(PRIM_CHUNK)
+                    .map(move |s| (g, s, (s + PRIM_CHUNK).min(m.triangle_count())))
             })
             .collect();
+        let refs = |&(g, s, e): &(usize, usize, usize)| {
+            let m = &meshes[g];
+            let off = offsets[g];
+            (s..e).filter(|&i| m.is_hittable(i)).map(move |i| {
+                let [a, b, c] = m.triangle(i);
+                let (a, b, c) = (Vec3A::from(a), Vec3A::from(b), Vec3A::from(c));
+                PrimRef::new(Aabb { lo: a.min(b).min(c), hi: a.max(b).max(c) }, (off + i) as u32)
+            })
+        };
+        let parallel = total >= cfg.parallel_threshold;
+        let mut prims: Vec<PrimRef> = if parallel {
+            items.par_iter().flat_map_iter(refs).collect()
+        } else {
+            items.iter().flat_map(refs).collect()
+        };
         let skipped = total - prims.len();
         if prims.len().div_ceil(BLOCK) > MAX_BLOCK_INDEX {
             return Err(Error::TooManyTriangles(total));
@@ -101,21 +117,23 @@ impl Bvh {
             }
         };
         let prims_ref = &prims;
-        let blocks: Vec<TriBlock> = leaves
-            .par_iter()
-            .flat_map_iter(|&(start, count)| {
-                prims_ref[start..start + count].chunks(BLOCK).map(|chunk| {
-                    let mut tris = [(0u32, 0u32, [Vec3::ZERO; 3]); BLOCK];
-                    for (slot, p) in tris.iter_mut().zip(chunk) {
-                        let id = p.id() as usize;
-                        let g = offsets.partition_point(|&o| o <= id) - 1;
-                        let local = id - offsets[g];
-                        *slot = (g as u32, local as u32, meshes[g].triangle(local));
-                    }
-                    TriBlock::new(&tris[..chunk.len()])
-                })
+        let make_blocks = |&(start, count): &(usize, usize)| {
+            prims_ref[start..start + count].chunks(BLOCK).map(|chunk| {
+                let mut tris = [(0u32, 0u32, [Vec3::ZERO; 3]); BLOCK];
+                for (slot, p) in tris.iter_mut().zip(chunk) {
+                    let id = p.id() as usize;
+                    let g = offsets.partition_point(|&o| o <= id) - 1;
+                    let local = id - offsets[g];
+                    *slot = (g as u32, local as u32, meshes[g].triangle(local));
+                }
+                TriBlock::new(&tris[..chunk.len()])
             })
-            .collect();
+        };
+        let blocks: Vec<TriBlock> = if parallel {
+            leaves.par_iter().flat_map_iter(make_blocks).collect()
+        } else {
+            leaves.iter().flat_map(make_blocks).collect()
+        };
         let mut bvh = Bvh { nodes, blocks, root, bounds, stats: BuildStats::default() };
         let build_ms = start.elapsed().as_secs_f64() * 1e3;
         bvh.stats = bvh.compute_stats(tree.as_ref().map(|t| &t.1), prims.len(), skipped, build_ms);
