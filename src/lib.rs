@@ -44,3 +44,8 @@ pub use error::{Error, Result};
 pub use geometry::{TriangleMesh, load_obj};
 pub use ray::{Hit, HitPacket, HitStream, INVALID_ID, PACKET_WIDTH, Ray, RayPacket, RayStream};
 pub use scene::{Coherence, STREAM_CHUNK, Scene};
+
+/// The README's code examples run as doctests.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+pub struct ReadmeDoctests;
