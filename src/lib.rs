@@ -38,10 +38,10 @@ pub mod raygen;
 pub mod scene;
 pub mod simd;
 
-pub use bvh::{BuildConfig, BuildStats};
+pub use bvh::{BoxTest, BuildConfig, BuildStats};
 pub use camera::Camera;
 pub use error::{Error, Result};
-pub use geometry::{TriangleMesh, load_obj};
+pub use geometry::{TriangleMesh, TriangleTest, exact_hit, load_obj};
 pub use ray::{Hit, HitPacket, HitStream, INVALID_ID, PACKET_WIDTH, Ray, RayPacket, RayStream};
 pub use scene::{Coherence, STREAM_CHUNK, Scene};
 

@@ -9,8 +9,9 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use crate::bvh::traverse::PacketHits;
-use crate::bvh::{BuildConfig, BuildStats, Bvh};
+use crate::bvh::{BoxTest, BuildConfig, BuildStats, Bvh};
 use crate::error::Result;
+use crate::geometry::TriangleTest;
 use crate::geometry::{TriangleMesh, load_obj};
 use crate::ray::{Hit, HitPacket, HitStream, INVALID_ID, PACKET_WIDTH, Ray, RayPacket, RayStream};
 
@@ -50,6 +51,11 @@ impl Scene {
 
     pub fn meshes(&self) -> &[TriangleMesh] {
         &self.meshes
+    }
+
+    /// The triangle and box tests this scene was built for.
+    pub fn tests(&self) -> (TriangleTest, BoxTest) {
+        (self.bvh.test, self.bvh.box_test)
     }
 
     pub fn stats(&self) -> &BuildStats {
@@ -200,19 +206,7 @@ impl Scene {
     /// The closest hit by testing every triangle, with the same triangle test as the BVH: the
     /// reference the BVH is tested against. O(triangles) per ray.
     pub fn intersect_brute_force(&self, ray: &Ray) -> Option<Hit> {
-        if !ray.is_valid() {
-            return None;
-        }
-        let r4 = crate::geometry::triangle::Ray4::new(ray.origin, ray.dir);
-        let mut tfar = ray.tfar;
-        let mut best = None;
-        for (bi, b) in self.bvh.blocks.iter().enumerate() {
-            if let Some((lane, t, u, v)) = crate::geometry::triangle::intersect1(b, &r4, ray.tnear, tfar) {
-                tfar = t;
-                best = Some(crate::bvh::traverse::LeafHit { block: bi as u32, lane: lane as u32, t, u, v });
-            }
-        }
-        best.map(|h| self.bvh.hit_record(&h))
+        self.bvh.brute_force(ray).map(|h| self.bvh.hit_record(&h))
     }
 }
 

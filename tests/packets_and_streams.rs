@@ -70,6 +70,21 @@ fn incoherent_random_rays() {
 }
 
 #[test]
+fn every_method_agrees_across_apis() {
+    let mesh = strahl::procedural::sphereflake(1, 8, 16);
+    let cam = Camera::look_at(Vec3::new(0.0, 1.2, 4.5), Vec3::new(0.0, 0.3, 0.0), Vec3::Y, 60.0);
+    let (primary, _) = raygen::primary(&cam, 64, 48);
+    let random: RayStream = random_rays(8, 2000).into_iter().collect();
+    for t in strahl::TriangleTest::ALL {
+        for b in strahl::BoxTest::ALL {
+            let scene = Scene::build(vec![mesh.clone()], &strahl::BuildConfig::default().with_tests(t, b)).unwrap();
+            all_apis_agree(&scene, &primary, &format!("{t:?} {b:?} primary"));
+            all_apis_agree(&scene, &random, &format!("{t:?} {b:?} random"));
+        }
+    }
+}
+
+#[test]
 fn mixed_bad_lanes_in_a_packet() {
     let scene = scene_of(vec![random_soup(6, 200, 0.2)]);
     let good: Vec<Ray> = random_rays(6, PACKET_WIDTH);

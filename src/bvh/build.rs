@@ -12,7 +12,8 @@ use glam::{Vec3A, Vec4};
 use rayon::prelude::*;
 
 use super::node::{MAX_LEAF_BLOCKS, WIDTH};
-use crate::geometry::triangle::BLOCK;
+use super::traverse::BoxTest;
+use crate::geometry::triangle::{BLOCK, TriangleTest};
 use crate::simd::trunc4;
 
 /// Builder settings. Costs are per node visit and per block test, as in Embree's statistics.
@@ -30,6 +31,10 @@ pub struct BuildConfig {
     pub intersection_cost: f32,
     /// Subtrees with more primitives are built in parallel.
     pub parallel_threshold: usize,
+    /// The ray–triangle test the leaves are laid out for.
+    pub triangle_test: TriangleTest,
+    /// The ray–box test traversal uses.
+    pub box_test: BoxTest,
 }
 
 impl Default for BuildConfig {
@@ -42,6 +47,8 @@ impl Default for BuildConfig {
             traversal_cost: 1.0,
             intersection_cost: 1.0,
             parallel_threshold: 4096,
+            triangle_test: TriangleTest::MollerTrumbore,
+            box_test: BoxTest::Conservative,
         }
     }
 }
@@ -50,6 +57,16 @@ impl BuildConfig {
     /// Fewer bins: a faster build of a slightly worse tree.
     pub fn fast() -> Self {
         Self { bins: 16, ..Self::default() }
+    }
+
+    /// Watertight triangles and conservative boxes: no ray leaks through a closed mesh.
+    pub fn watertight() -> Self {
+        Self { triangle_test: TriangleTest::Watertight, box_test: BoxTest::Conservative, ..Self::default() }
+    }
+
+    /// This configuration with another triangle and box test.
+    pub fn with_tests(&self, triangle_test: TriangleTest, box_test: BoxTest) -> Self {
+        Self { triangle_test, box_test, ..self.clone() }
     }
 
     fn clamped(&self) -> Self {
@@ -61,6 +78,7 @@ impl BuildConfig {
             traversal_cost: self.traversal_cost.max(0.0),
             intersection_cost: self.intersection_cost.max(1e-6),
             parallel_threshold: self.parallel_threshold.max(64),
+            ..*self
         }
     }
 }

@@ -14,10 +14,11 @@ use rayon::prelude::*;
 pub use build::BuildConfig;
 use build::{Aabb, BuildNode, PrimRef};
 use node::{EMPTY, MAX_BLOCK_INDEX, Node, leaf_ref};
+pub use traverse::BoxTest;
 
 use crate::error::{Error, Result};
 use crate::geometry::TriangleMesh;
-use crate::geometry::triangle::{BLOCK, TriBlock};
+use crate::geometry::triangle::{BLOCK, TriBlock, TriangleTest};
 
 /// Figures the builder reports.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -48,6 +49,8 @@ pub(crate) struct Bvh {
     pub blocks: Vec<TriBlock>,
     pub root: u32,
     pub bounds: Option<(Vec3, Vec3)>,
+    pub test: TriangleTest,
+    pub box_test: BoxTest,
     pub stats: BuildStats,
 }
 
@@ -126,7 +129,7 @@ impl Bvh {
                     let local = id - offsets[g];
                     *slot = (g as u32, local as u32, meshes[g].triangle(local));
                 }
-                TriBlock::new(&tris[..chunk.len()])
+                TriBlock::new(cfg.triangle_test, &tris[..chunk.len()])
             })
         };
         let blocks: Vec<TriBlock> = if parallel {
@@ -134,7 +137,15 @@ impl Bvh {
         } else {
             leaves.iter().flat_map(make_blocks).collect()
         };
-        let mut bvh = Bvh { nodes, blocks, root, bounds, stats: BuildStats::default() };
+        let mut bvh = Bvh {
+            nodes,
+            blocks,
+            root,
+            bounds,
+            test: cfg.triangle_test,
+            box_test: cfg.box_test,
+            stats: BuildStats::default(),
+        };
         let build_ms = start.elapsed().as_secs_f64() * 1e3;
         bvh.stats = bvh.compute_stats(tree.as_ref().map(|t| &t.1), prims.len(), skipped, build_ms);
         Ok(bvh)

@@ -1,9 +1,13 @@
 //! Geometry: triangle meshes (storage and loading) apart from the SIMD triangle tests that run on
 //! the BVH's leaf blocks.
 
+pub(crate) mod badouel;
 pub mod mesh;
+pub(crate) mod moeller;
 pub mod obj;
-pub(crate) mod triangle;
+pub mod triangle;
+pub(crate) mod watertight;
 
 pub use mesh::TriangleMesh;
 pub use obj::load_obj;
+pub use triangle::{TriangleTest, exact_hit};

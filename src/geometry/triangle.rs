@@ -1,50 +1,91 @@
-//! Triangle leaf storage and the Möller–Trumbore test in SIMD form.
+//! Triangle leaf storage: blocks of [`BLOCK`] triangles in SoA form, laid out for the triangle test
+//! chosen at build time ([`TriangleTest`]), and the [`Kernel`] interface the traversal calls.
 //!
-//! Storage follows Embree's `Triangle4` (`kernels/geometry/triangle.h`): blocks of [`BLOCK`]
-//! triangles in SoA form holding `v0`, `e1 = v0 − v1` and `e2 = v2 − v0`, so the test needs no
-//! vertex gathers. The test is Embree's `MoellerTrumboreIntersector`
-//! (`triangle_intersector_moeller.h`) — Möller & Trumbore, "Fast, Minimum Storage Ray/Triangle
-//! Intersection", JGT 1997; the seeds' slides on ray–triangle tests — with no epsilon on the
-//! barycentric test and the depth test `tnear < t <= tfar`, so that hits agree with Embree's default
-//! scenes. Two forms: one ray against the [`BLOCK`] triangles of a block (`intersect1`), and one
-//! triangle against the lanes of a packet (`intersect_packet`).
+//! Each test lives in its own file: [`moeller`](super::moeller) (Embree's default),
+//! [`badouel`](super::badouel) (the seeds' plane-and-projection test) and
+//! [`watertight`](super::watertight) (Woop–Benthin–Wald 2013).
 
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 
+use crate::ray::RayPacket;
 use crate::simd::*;
 
 /// Triangles per leaf block (M in Embree's naming).
 pub(crate) const BLOCK: usize = 4;
 
-/// [`BLOCK`] triangles in SoA form. Unused lanes hold NaN corners, which fail every comparison
-/// and so are never hit.
+/// The ray–triangle test a scene is built for. See `../shared/ACCURACY.md` for where each fails.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum TriangleTest {
+    /// Möller & Trumbore (JGT 1997) on precomputed edges, as Embree's default scenes do: the
+    /// fastest; not watertight (rays can slip through shared edges and vertices).
+    #[default]
+    MollerTrumbore,
+    /// Badouel (Graphics Gems 1990; the seeds' slides): intersect the plane, project onto the
+    /// coordinate plane that drops the normal's dominant axis, test 2D barycentrics. Precomputed
+    /// in Wald's form ("Realtime Ray Tracing and Interactive Global Illumination", 2004, §7.1).
+    /// Not watertight: neighbours projected on different axes disagree at their shared edge.
+    Badouel,
+    /// Woop, Benthin & Wald, "Watertight Ray/Triangle Intersection" (JCGT 2013): shear the
+    /// triangle into ray space and test signed edge functions, recomputed in float64 when one is
+    /// exactly zero. No ray passes between two triangles sharing an edge or a vertex.
+    Watertight,
+}
+
+impl TriangleTest {
+    pub const ALL: [TriangleTest; 3] = [TriangleTest::MollerTrumbore, TriangleTest::Badouel, TriangleTest::Watertight];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            TriangleTest::MollerTrumbore => "moller_trumbore",
+            TriangleTest::Badouel => "badouel",
+            TriangleTest::Watertight => "watertight",
+        }
+    }
+
+    /// Whether the test closes every shared edge and vertex.
+    pub fn is_watertight(self) -> bool {
+        self == TriangleTest::Watertight
+    }
+}
+
+/// [`BLOCK`] triangles in SoA form. What the nine rows hold depends on the test:
+/// Möller–Trumbore `v0, e1 = v0 − v1, e2 = v2 − v0` (Embree's `Triangle4`); watertight `v0, v1, v2`;
+/// Badouel `n_u, n_v, n_d, β_u, β_v, β_d, γ_u, γ_v, γ_d` with the projection axis and normal sign in
+/// `aux`. Unused lanes hold NaN, which fails every depth test, and `prim = u32::MAX`.
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(16))]
 pub(crate) struct TriBlock {
-    pub v0: [[f32; BLOCK]; 3],
-    pub e1: [[f32; BLOCK]; 3],
-    pub e2: [[f32; BLOCK]; 3],
+    pub rows: [[f32; BLOCK]; 9],
     pub geom: [u32; BLOCK],
     pub prim: [u32; BLOCK],
+    /// Badouel: bits 0–1 the dropped axis k, bit 2 set when the normal's k component is negative.
+    pub aux: [u8; BLOCK],
 }
 
 impl TriBlock {
-    /// Packs up to [`BLOCK`] triangles `(geom_id, prim_id, corners)`.
-    pub fn new(tris: &[(u32, u32, [Vec3; 3])]) -> Self {
+    /// Packs up to [`BLOCK`] triangles `(geom_id, prim_id, corners)` for `test`.
+    pub fn new(test: TriangleTest, tris: &[(u32, u32, [Vec3; 3])]) -> Self {
         let mut b = TriBlock {
-            v0: [[f32::NAN; BLOCK]; 3],
-            e1: [[f32::NAN; BLOCK]; 3],
-            e2: [[f32::NAN; BLOCK]; 3],
+            rows: [[f32::NAN; BLOCK]; 9],
             geom: [u32::MAX; BLOCK],
             prim: [u32::MAX; BLOCK],
+            aux: [0; BLOCK],
         };
         for (lane, &(g, p, [a, bb, c])) in tris.iter().take(BLOCK).enumerate() {
-            let e1 = a - bb;
-            let e2 = c - a;
-            for k in 0..3 {
-                b.v0[k][lane] = a[k];
-                b.e1[k][lane] = e1[k];
-                b.e2[k][lane] = e2[k];
+            let rows: [f32; 9] = match test {
+                TriangleTest::MollerTrumbore => {
+                    let (e1, e2) = (a - bb, c - a);
+                    [a.x, a.y, a.z, e1.x, e1.y, e1.z, e2.x, e2.y, e2.z]
+                }
+                TriangleTest::Watertight => [a.x, a.y, a.z, bb.x, bb.y, bb.z, c.x, c.y, c.z],
+                TriangleTest::Badouel => {
+                    let (rows, aux) = super::badouel::precompute(a, bb, c);
+                    b.aux[lane] = aux;
+                    rows
+                }
+            };
+            for (r, v) in b.rows.iter_mut().zip(rows) {
+                r[lane] = v;
             }
             b.geom[lane] = g;
             b.prim[lane] = p;
@@ -52,20 +93,33 @@ impl TriBlock {
         b
     }
 
-    /// Geometric normal `(v1 − v0) × (v2 − v0)` of lane `lane`, computed as Embree does.
-    #[inline]
-    pub fn ng(&self, lane: usize) -> Vec3 {
-        let e1 = Vec3::new(self.e1[0][lane], self.e1[1][lane], self.e1[2][lane]);
-        let e2 = Vec3::new(self.e2[0][lane], self.e2[1][lane], self.e2[2][lane]);
-        e2.cross(e1)
+    #[inline(always)]
+    pub fn row3(&self, first: usize, lane: usize) -> Vec3 {
+        Vec3::new(self.rows[first][lane], self.rows[first + 1][lane], self.rows[first + 2][lane])
+    }
+
+    /// Geometric normal of lane `lane`: `(v1 − v0) × (v2 − v0)` for Möller–Trumbore and watertight;
+    /// for Badouel the same direction scaled so that its dominant component is ±1.
+    #[inline(always)]
+    pub fn ng(&self, test: TriangleTest, lane: usize) -> Vec3 {
+        match test {
+            TriangleTest::MollerTrumbore => self.row3(6, lane).cross(self.row3(3, lane)),
+            TriangleTest::Watertight => {
+                let v0 = self.row3(0, lane);
+                (self.row3(3, lane) - v0).cross(self.row3(6, lane) - v0)
+            }
+            TriangleTest::Badouel => super::badouel::normal(self, lane),
+        }
     }
 }
 
-/// A ray's origin and direction splatted across [`BLOCK`] lanes, made once per ray.
+/// A ray splatted for one block test, with per-ray data some tests precompute.
 #[derive(Clone, Copy)]
 pub(crate) struct Ray4 {
     pub o: [f32x4; 3],
     pub d: [f32x4; 3],
+    /// The direction itself, for tests that permute axes per ray.
+    pub ds: Vec3,
 }
 
 impl Ray4 {
@@ -74,61 +128,13 @@ impl Ray4 {
         Self {
             o: [f32x4::splat(o.x), f32x4::splat(o.y), f32x4::splat(o.z)],
             d: [f32x4::splat(d.x), f32x4::splat(d.y), f32x4::splat(d.z)],
+            ds: d,
         }
     }
 }
 
-#[inline(always)]
-fn cross<T: Copy + core::ops::Mul<Output = T> + core::ops::Sub<Output = T>>(a: [T; 3], b: [T; 3]) -> [T; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
-
-#[inline(always)]
-fn dot<T: Copy + core::ops::Mul<Output = T> + core::ops::Add<Output = T>>(a: [T; 3], b: [T; 3]) -> T {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-/// The nearest hit of one ray among the triangles of a block, as `(lane, t, u, v)`.
-#[inline(always)]
-pub(crate) fn intersect1(b: &TriBlock, r: &Ray4, tnear: f32, tfar: f32) -> Option<(usize, f32, f32, f32)> {
-    let ld = |a: &[[f32; BLOCK]; 3]| [f32x4::new(a[0]), f32x4::new(a[1]), f32x4::new(a[2])];
-    let (v0, e1, e2) = (ld(&b.v0), ld(&b.e1), ld(&b.e2));
-    // Edge tests: the signs of U and V decide the hit, made independent of the winding by
-    // flipping with the sign of the determinant.
-    let c = [v0[0] - r.o[0], v0[1] - r.o[1], v0[2] - r.o[2]];
-    let rr = cross(c, r.d);
-    let ng = cross(e2, e1);
-    let den = dot(ng, r.d);
-    let abs_den = den.abs();
-    let sgn = den & f32x4::splat(-0.0);
-    let u = dot(rr, e2) ^ sgn;
-    let v = dot(rr, e1) ^ sgn;
-    let zero = f32x4::splat(0.0);
-    let valid = den.simd_ne(zero) & u.simd_ge(zero) & v.simd_ge(zero) & (u + v).simd_le(abs_den);
-    if valid.to_bitmask() == 0 {
-        return None;
-    }
-    // Depth test, scaled by |den| to avoid the division for rejected lanes.
-    let tt = dot(ng, c) ^ sgn;
-    let valid = valid & (abs_den * f32x4::splat(tnear)).simd_lt(tt) & tt.simd_le(abs_den * f32x4::splat(tfar));
-    let bits = valid.to_bitmask();
-    if bits == 0 {
-        return None;
-    }
-    let inv = f32x4::splat(1.0) / abs_den;
-    let t = valid.select(tt * inv, f32x4::splat(f32::INFINITY)).to_array();
-    // The nearest lane; among equal distances the lowest lane wins, as in Embree's select_min.
-    let mut best = bits.trailing_zeros() as usize;
-    for (lane, &tl) in t.iter().enumerate().skip(best + 1) {
-        if tl < t[best] {
-            best = lane;
-        }
-    }
-    let (u, v) = ((u * inv).to_array(), (v * inv).to_array());
-    Some((best, t[best], u[best], v[best]))
-}
-
-/// Packet lanes in SoA form for the broadcast test.
+/// Packet lanes in SoA form for the broadcast tests. Kept to the vectors the tests use, so that
+/// they stay in registers (with two per-lane `Vec3` arrays added, Sponza's primary packets lost 13%).
 #[derive(Clone, Copy)]
 pub(crate) struct RayK {
     pub o: [Pf; 3],
@@ -136,102 +142,178 @@ pub(crate) struct RayK {
     pub tnear: Pf,
 }
 
-/// Lanes of a packet that hit triangle `lane` of block `b` within `(tnear, tfar]`, with their
-/// `t`, `u` and `v`. Only lanes in `active` are reported.
+/// One ray–triangle test in its two SIMD forms. `Pre` is what the test precomputes per ray.
+pub(crate) trait Kernel {
+    type Pre: Copy;
+
+    fn pre(r: &Ray4) -> Self::Pre;
+
+    /// The nearest hit of one ray among the triangles of a block in `(tnear, tfar]`, as
+    /// `(lane, t, u, v)`; among equal distances the lowest lane wins.
+    fn intersect1(b: &TriBlock, r: &Ray4, pre: &Self::Pre, tnear: f32, tfar: f32) -> Option<(usize, f32, f32, f32)>;
+
+    /// The lanes of a packet (within `active`) hitting triangle `lane` of `b` in `(tnear, tfar]`,
+    /// with their `t`, `u`, `v`.
+    fn intersect_packet(
+        b: &TriBlock,
+        lane: usize,
+        r: &RayK,
+        rays: &RayPacket,
+        tfar: Pf,
+        active: Pf,
+    ) -> (Pf, Pf, Pf, Pf);
+}
+
+/// Picks the nearest valid lane of a block test: `(lane, t, u, v)`.
 #[inline(always)]
-pub(crate) fn intersect_packet(b: &TriBlock, lane: usize, r: &RayK, tfar: Pf, active: Pf) -> (Pf, Pf, Pf, Pf) {
-    let s = |a: &[[f32; BLOCK]; 3]| [Pf::splat(a[0][lane]), Pf::splat(a[1][lane]), Pf::splat(a[2][lane])];
-    let (v0, e1, e2) = (s(&b.v0), s(&b.e1), s(&b.e2));
-    let c = [v0[0] - r.o[0], v0[1] - r.o[1], v0[2] - r.o[2]];
-    let rr = cross(c, r.d);
-    let ng = cross(e2, e1);
-    let den = dot(ng, r.d);
-    let abs_den = den.abs();
-    let sgn = den & Pf::splat(-0.0);
-    let u = dot(rr, e2) ^ sgn;
-    let v = dot(rr, e1) ^ sgn;
-    let zero = Pf::splat(0.0);
-    let valid = active & den.simd_ne(zero) & u.simd_ge(zero) & v.simd_ge(zero) & (u + v).simd_le(abs_den);
-    if valid.to_bitmask() == 0 {
-        return (valid, zero, zero, zero);
+pub(crate) fn nearest(valid: f32x4, t: f32x4, u: f32x4, v: f32x4) -> Option<(usize, f32, f32, f32)> {
+    let bits = valid.to_bitmask();
+    if bits == 0 {
+        return None;
     }
-    let tt = dot(ng, c) ^ sgn;
-    let valid = valid & (abs_den * r.tnear).simd_lt(tt) & tt.simd_le(abs_den * tfar);
-    let inv = Pf::splat(1.0) / abs_den;
-    (valid, tt * inv, u * inv, v * inv)
+    let t = valid.select(t, f32x4::splat(f32::INFINITY)).to_array();
+    let mut best = bits.trailing_zeros() as usize;
+    for (lane, &tl) in t.iter().enumerate().skip(best + 1) {
+        if tl < t[best] {
+            best = lane;
+        }
+    }
+    Some((best, t[best], u.to_array()[best], v.to_array()[best]))
+}
+
+#[inline(always)]
+pub(crate) fn cross<T: Copy + core::ops::Mul<Output = T> + core::ops::Sub<Output = T>>(a: [T; 3], b: [T; 3]) -> [T; 3] {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+
+#[inline(always)]
+pub(crate) fn dot<T: Copy + core::ops::Mul<Output = T> + core::ops::Add<Output = T>>(a: [T; 3], b: [T; 3]) -> T {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// Float64 Möller–Trumbore without range checks, `(t, [w0, w1, w2])` (weights of v0, v1, v2), or
+/// `None` for a ray parallel to the plane: the reference every test's `t` is measured against.
+pub fn exact_hit(origin: Vec3, dir: Vec3, tri: [Vec3; 3]) -> Option<(f64, [f64; 3])> {
+    let o = origin.as_dvec3();
+    let d = dir.as_dvec3();
+    let [a, b, c]: [DVec3; 3] = tri.map(|p| p.as_dvec3());
+    let e1 = b - a;
+    let e2 = c - a;
+    let p = d.cross(e2);
+    let det = e1.dot(p);
+    if det == 0.0 || !det.is_finite() {
+        return None;
+    }
+    let s = o - a;
+    let u = s.dot(p) / det;
+    let q = s.cross(e1);
+    let v = d.dot(q) / det;
+    let t = e2.dot(q) / det;
+    Some((t, [1.0 - u - v, u, v]))
 }
 
 #[cfg(test)]
 mod tests {
+    use super::super::{badouel::Badouel, moeller::Moller, watertight::Watertight};
     use super::*;
 
-    fn block1(a: Vec3, b: Vec3, c: Vec3) -> TriBlock {
-        TriBlock::new(&[(0, 7, [a, b, c])])
+    fn block1(test: TriangleTest, a: Vec3, b: Vec3, c: Vec3) -> TriBlock {
+        TriBlock::new(test, &[(0, 7, [a, b, c])])
+    }
+
+    fn one<K: Kernel>(b: &TriBlock, o: Vec3, d: Vec3, tnear: f32, tfar: f32) -> Option<(usize, f32, f32, f32)> {
+        let r = Ray4::new(o, d);
+        K::intersect1(b, &r, &K::pre(&r), tnear, tfar)
+    }
+
+    fn each(f: impl Fn(TriangleTest, &dyn Fn(&TriBlock, Vec3, Vec3, f32, f32) -> Option<(usize, f32, f32, f32)>)) {
+        f(TriangleTest::MollerTrumbore, &one::<Moller>);
+        f(TriangleTest::Badouel, &one::<Badouel>);
+        f(TriangleTest::Watertight, &one::<Watertight>);
     }
 
     #[test]
     fn barycentrics_and_normal_match_the_definition() {
-        let (a, b, c) = (Vec3::new(0.0, 0.0, 0.0), Vec3::new(2.0, 0.0, 0.0), Vec3::new(0.0, 2.0, 0.0));
-        let blk = block1(a, b, c);
-        let o = Vec3::new(0.5, 0.25, 3.0);
-        let d = Vec3::new(0.0, 0.0, -1.5);
-        let (lane, t, u, v) = intersect1(&blk, &Ray4::new(o, d), 0.0, f32::INFINITY).unwrap();
-        assert_eq!(lane, 0);
-        assert!((t - 2.0).abs() < 1e-6);
-        let p = a * (1.0 - u - v) + b * u + c * v;
-        assert!((p - (o + d * t)).length() < 1e-6, "{p}");
-        assert_eq!(blk.ng(0), (b - a).cross(c - a));
+        each(|test, hit| {
+            let (a, b, c) = (Vec3::new(0.0, 0.0, 0.0), Vec3::new(2.0, 0.0, 0.0), Vec3::new(0.0, 2.0, 0.0));
+            let blk = block1(test, a, b, c);
+            let o = Vec3::new(0.5, 0.25, 3.0);
+            let d = Vec3::new(0.0, 0.0, -1.5);
+            let (lane, t, u, v) = hit(&blk, o, d, 0.0, f32::INFINITY).unwrap();
+            assert_eq!(lane, 0);
+            assert!((t - 2.0).abs() < 1e-6, "{test:?} t {t}");
+            let p = a * (1.0 - u - v) + b * u + c * v;
+            assert!((p - (o + d * t)).length() < 1e-5, "{test:?} {p}");
+            let n = blk.ng(test, 0);
+            assert!(n.normalize().dot((b - a).cross(c - a).normalize()) > 0.9999, "{test:?} {n}");
+        });
     }
 
     #[test]
-    fn depth_test_is_half_open() {
-        let blk = block1(Vec3::new(-1.0, -1.0, 0.0), Vec3::new(1.0, -1.0, 0.0), Vec3::new(0.0, 1.0, 0.0));
-        let r = Ray4::new(Vec3::new(0.0, 0.0, 1.0), Vec3::new(0.0, 0.0, -1.0));
-        assert!(intersect1(&blk, &r, 0.0, 1.0).is_some(), "t == tfar hits");
-        assert!(intersect1(&blk, &r, 1.0, 2.0).is_none(), "t == tnear misses");
-        assert!(intersect1(&blk, &r, 0.0, 0.999).is_none());
-        // Both windings hit.
-        let back = Ray4::new(Vec3::new(0.0, 0.0, -1.0), Vec3::new(0.0, 0.0, 1.0));
-        assert!(intersect1(&blk, &back, 0.0, 5.0).is_some());
+    fn depth_test_is_half_open_and_both_windings_hit() {
+        each(|test, hit| {
+            let blk = block1(test, Vec3::new(-1.0, -1.0, 0.0), Vec3::new(1.0, -1.0, 0.0), Vec3::new(0.0, 1.0, 0.0));
+            let (o, d) = (Vec3::new(0.0, 0.0, 1.0), Vec3::new(0.0, 0.0, -1.0));
+            assert!(hit(&blk, o, d, 0.0, 1.0).is_some(), "{test:?}: t == tfar hits");
+            assert!(hit(&blk, o, d, 1.0, 2.0).is_none(), "{test:?}: t == tnear misses");
+            assert!(hit(&blk, o, d, 0.0, 0.999).is_none(), "{test:?}");
+            assert!(hit(&blk, -o, -d, 0.0, 5.0).is_some(), "{test:?}: back face");
+            // Outside the triangle.
+            assert!(hit(&blk, Vec3::new(0.9, 0.9, 1.0), d, 0.0, 5.0).is_none(), "{test:?}");
+        });
     }
 
     #[test]
     fn padding_lanes_never_hit() {
-        let blk = TriBlock::new(&[]);
-        let r = Ray4::new(Vec3::ZERO, Vec3::X);
-        assert!(intersect1(&blk, &r, f32::NEG_INFINITY, f32::INFINITY).is_none());
+        each(|test, hit| {
+            let blk = TriBlock::new(test, &[]);
+            assert!(hit(&blk, Vec3::ZERO, Vec3::X, f32::NEG_INFINITY, f32::INFINITY).is_none(), "{test:?}");
+            assert!(hit(&blk, Vec3::new(1.0, 2.0, 3.0), Vec3::new(-1.0, 0.5, 0.1), 0.0, f32::INFINITY).is_none());
+        });
     }
 
-    #[test]
-    fn packet_form_matches_single_form() {
-        let blk = block1(Vec3::new(-1.0, -1.0, 0.0), Vec3::new(1.0, -1.0, 0.0), Vec3::new(0.0, 1.0, 0.0));
-        let mut o = [[0.0f32; PACKET_WIDTH]; 3];
-        let mut d = [[0.0f32; PACKET_WIDTH]; 3];
+    fn packet_matches_single<K: Kernel>(test: TriangleTest) {
+        let blk = block1(test, Vec3::new(-1.0, -1.0, 0.0), Vec3::new(1.0, -1.0, 0.0), Vec3::new(0.0, 1.0, 0.0));
+        let mut os = [Vec3::ZERO; PACKET_WIDTH];
+        let mut ds = [Vec3::ZERO; PACKET_WIDTH];
         for i in 0..PACKET_WIDTH {
-            o[0][i] = -1.2 + 0.16 * i as f32;
-            o[1][i] = 0.3 - 0.1 * i as f32;
-            o[2][i] = 2.0;
-            d[2][i] = -1.0;
-            d[0][i] = 0.01 * i as f32;
+            os[i] = Vec3::new(-1.2 + 0.16 * i as f32, 0.3 - 0.1 * i as f32, 2.0);
+            ds[i] = Vec3::new(0.01 * i as f32, 0.0, -1.0);
         }
+        let col = |f: fn(Vec3) -> f32, v: &[Vec3; PACKET_WIDTH]| Pf::new(std::array::from_fn(|i| f(v[i])));
         let rk = RayK {
-            o: [Pf::new(o[0]), Pf::new(o[1]), Pf::new(o[2])],
-            d: [Pf::new(d[0]), Pf::new(d[1]), Pf::new(d[2])],
+            o: [col(|v| v.x, &os), col(|v| v.y, &os), col(|v| v.z, &os)],
+            d: [col(|v| v.x, &ds), col(|v| v.y, &ds), col(|v| v.z, &ds)],
             tnear: Pf::splat(0.0),
         };
+        let rays: Vec<crate::ray::Ray> = (0..PACKET_WIDTH).map(|i| crate::ray::Ray::new(os[i], ds[i])).collect();
+        let packet = RayPacket::from_rays(&rays);
         let all = Pf::splat(0.0).simd_eq(Pf::splat(0.0));
-        let (valid, t, _, _) = intersect_packet(&blk, 0, &rk, Pf::splat(f32::INFINITY), all);
+        let (valid, t, _, _) = K::intersect_packet(&blk, 0, &rk, &packet, Pf::splat(f32::INFINITY), all);
         let (bits, t) = (valid.to_bitmask(), t.to_array());
         let mut hits = 0;
         for i in 0..PACKET_WIDTH {
-            let single = Ray4::new(Vec3::new(o[0][i], o[1][i], o[2][i]), Vec3::new(d[0][i], d[1][i], d[2][i]));
-            let s = intersect1(&blk, &single, 0.0, f32::INFINITY);
-            assert_eq!(s.is_some(), bits & (1 << i) != 0, "lane {i}");
+            let s = one::<K>(&blk, os[i], ds[i], 0.0, f32::INFINITY);
+            assert_eq!(s.is_some(), bits & (1 << i) != 0, "{test:?} lane {i}");
             if let Some((_, ts, _, _)) = s {
-                assert_eq!(ts, t[i]);
+                assert_eq!(ts, t[i], "{test:?}");
                 hits += 1;
             }
         }
         assert!(hits > 3 && hits < PACKET_WIDTH, "the test rays should both hit and miss: {hits}");
+    }
+
+    #[test]
+    fn packet_forms_match_single_forms() {
+        packet_matches_single::<Moller>(TriangleTest::MollerTrumbore);
+        packet_matches_single::<Badouel>(TriangleTest::Badouel);
+        packet_matches_single::<Watertight>(TriangleTest::Watertight);
+    }
+
+    #[test]
+    fn exact_reference() {
+        let (t, b) =
+            exact_hit(Vec3::new(0.25, 0.5, 2.0), Vec3::new(0.0, 0.0, -1.0), [Vec3::ZERO, Vec3::X, Vec3::Y]).unwrap();
+        assert!((t - 2.0).abs() < 1e-12 && (b[1] - 0.25).abs() < 1e-12 && (b[2] - 0.5).abs() < 1e-12);
     }
 }
