@@ -41,8 +41,8 @@ pub mod simd;
 pub use bvh::{BoxTest, BuildConfig, BuildStats};
 pub use camera::Camera;
 pub use error::{Error, Result};
-pub use geometry::{TriangleMesh, TriangleTest, exact_hit, load_obj};
-pub use ray::{Hit, HitPacket, HitStream, INVALID_ID, PACKET_WIDTH, Ray, RayPacket, RayStream};
+pub use geometry::{TriangleMesh, TriangleTest, exact_hit, intersect_triangle, load_obj};
+pub use ray::{Hit, HitPacket, HitStream, INVALID_ID, PACKET_WIDTH, Ray, RayPacket, RayStream, offset_ray_origin};
 pub use scene::{Coherence, STREAM_CHUNK, Scene};
 
 /// The README's code examples run as doctests.

@@ -38,15 +38,47 @@ impl Ray {
 
     /// Whether the ray can hit anything. Rays with a NaN or infinite origin or direction, a zero
     /// direction, a NaN bound, or `tnear > tfar` are invalid; every query answers them with a miss
-    /// (and "not occluded") instead of an error, so that one bad ray cannot spoil a batch.
+    /// (and "not occluded") instead of an error, so that one bad ray cannot spoil a batch. A
+    /// direction with no component of magnitude 1e-18 or more counts as zero: traversal clamps
+    /// reciprocals there (as Embree does), and hit distances beyond 1e18 would overflow.
     pub fn is_valid(&self) -> bool {
         self.origin.is_finite()
             && self.dir.is_finite()
-            && self.dir != Vec3::ZERO
+            && self.dir.abs().max_element() >= MIN_DIRECTION
             && !self.tnear.is_nan()
             && !self.tfar.is_nan()
             && self.tnear <= self.tfar
     }
+}
+
+/// Moves a surface point `p` off the surface along its geometric normal `ng` (either side; pass
+/// `-ng` for the other), so that a secondary ray from the result with `tnear = 0` does not hit the
+/// surface it starts on, at any scene scale.
+///
+/// Wächter & Binder, "A Fast and Robust Method for Avoiding Self-Intersection" (Ray Tracing Gems,
+/// ch. 6, 2019): each coordinate is moved by a fixed number of units in the last place (an integer
+/// add on its bits, 256 ulps scaled by the normal's component), so the offset grows with the
+/// coordinate's magnitude exactly as its rounding error does; near the origin, where ulps become
+/// tiny, a fixed `1/65536` step along the normal is used instead.
+pub fn offset_ray_origin(p: Vec3, ng: Vec3) -> Vec3 {
+    const ORIGIN: f32 = 1.0 / 32.0;
+    const FLOAT_SCALE: f32 = 1.0 / 65536.0;
+    const INT_SCALE: f32 = 256.0;
+    let n = ng.normalize_or_zero();
+    let off = |x: f32, nx: f32| -> f32 {
+        if !x.is_finite() {
+            return x;
+        }
+        if x.abs() < ORIGIN {
+            return x + FLOAT_SCALE * nx;
+        }
+        let of_i = (INT_SCALE * nx) as i32;
+        // Moving away from zero when the offset and the coordinate share a sign, towards it otherwise.
+        let bits = x.to_bits() as i32;
+        let moved = if x < 0.0 { bits.wrapping_sub(of_i) } else { bits.wrapping_add(of_i) };
+        f32::from_bits(moved as u32)
+    };
+    Vec3::new(off(p.x, n.x), off(p.y, n.y), off(p.z, n.z))
 }
 
 /// A ray–surface intersection.
@@ -64,6 +96,9 @@ pub struct Hit {
     /// Index of the geometry (mesh) within the scene.
     pub geom_id: u32,
 }
+
+/// The smallest largest-component magnitude of a valid ray direction (see [`Ray::is_valid`]).
+pub const MIN_DIRECTION: f32 = 1e-18;
 
 /// Marks a miss in the SoA hit containers.
 pub const INVALID_ID: u32 = u32::MAX;
@@ -392,11 +427,29 @@ mod tests {
         let o = Vec3::ZERO;
         assert!(Ray::new(o, Vec3::X).is_valid());
         assert!(!Ray::new(o, Vec3::ZERO).is_valid());
+        assert!(!Ray::new(o, Vec3::new(1e-38, -1e-30, 0.0)).is_valid());
+        assert!(Ray::new(o, Vec3::new(1e-38, -1e-18, 0.0)).is_valid());
         assert!(!Ray::new(Vec3::NAN, Vec3::X).is_valid());
         assert!(!Ray::new(o, Vec3::new(f32::INFINITY, 0.0, 0.0)).is_valid());
         assert!(!Ray::segment(o, Vec3::X, 2.0, 1.0).is_valid());
         assert!(!Ray::segment(o, Vec3::X, f32::NAN, 1.0).is_valid());
         assert!(Ray::segment(o, Vec3::X, 1.0, 1.0).is_valid());
+    }
+
+    #[test]
+    fn offset_moves_to_the_normal_side_at_every_scale() {
+        for scale in [1e-3f32, 1.0, 1e3, 1e6] {
+            for n in [Vec3::X, Vec3::new(-0.3, 0.9, 0.1).normalize(), Vec3::new(0.0, 0.0, -1.0)] {
+                for p in [Vec3::new(0.3, -0.7, 0.01) * scale, Vec3::new(-5.0, 2.0, 9.0) * scale] {
+                    let q = offset_ray_origin(p, n);
+                    assert!(q.is_finite());
+                    assert!((q - p).dot(n) > 0.0, "scale {scale} p {p} n {n}: {q}");
+                    // Small relative to the coordinates: at most ~256 ulps per axis.
+                    assert!((q - p).length() <= 1e-4 * p.abs().max_element().max(1.0), "{p} -> {q}");
+                }
+            }
+        }
+        assert_eq!(offset_ray_origin(Vec3::ONE, Vec3::ZERO), Vec3::ONE);
     }
 
     #[test]

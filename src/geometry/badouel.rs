@@ -71,7 +71,10 @@ impl Kernel for Badouel {
         let den = dk + nu * du + nv * dv;
         let t = (nd - ok - nu * ou - nv * ov) / den;
         let zero = f32x4::splat(0.0);
-        let valid = den.simd_ne(zero) & f32x4::splat(tnear).simd_lt(t) & t.simd_le(f32x4::splat(tfar));
+        let valid = den.simd_ne(zero)
+            & f32x4::splat(tnear).simd_lt(t)
+            & t.simd_le(f32x4::splat(tfar))
+            & t.simd_lt(f32x4::splat(f32::INFINITY));
         if valid.to_bitmask() == 0 {
             return None;
         }
@@ -90,7 +93,8 @@ impl Kernel for Badouel {
         let den = r.d[k] + s(0) * r.d[u] + s(1) * r.d[v];
         let t = (s(2) - r.o[k] - s(0) * r.o[u] - s(1) * r.o[v]) / den;
         let zero = Pf::splat(0.0);
-        let valid = active & den.simd_ne(zero) & r.tnear.simd_lt(t) & t.simd_le(tfar);
+        let valid =
+            active & den.simd_ne(zero) & r.tnear.simd_lt(t) & t.simd_le(tfar) & t.simd_lt(Pf::splat(f32::INFINITY));
         if valid.to_bitmask() == 0 {
             return (valid, zero, zero, zero);
         }

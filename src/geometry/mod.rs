@@ -10,4 +10,4 @@ pub(crate) mod watertight;
 
 pub use mesh::TriangleMesh;
 pub use obj::load_obj;
-pub use triangle::{TriangleTest, exact_hit};
+pub use triangle::{TriangleTest, exact_hit, intersect_triangle};

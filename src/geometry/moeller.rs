@@ -41,7 +41,9 @@ impl Kernel for Moller {
             return None;
         }
         let inv = f32x4::splat(1.0) / abs_den;
-        nearest(valid, tt * inv, u * inv, v * inv)
+        let t = tt * inv;
+        // A tiny determinant can overflow t (directions near 1e-38): such a hit is no hit.
+        nearest(valid & t.simd_lt(f32x4::splat(f32::INFINITY)), t, u * inv, v * inv)
     }
 
     #[inline(always)]
@@ -65,6 +67,7 @@ impl Kernel for Moller {
         let tt = dot(ng, c) ^ sgn;
         let valid = valid & (abs_den * r.tnear).simd_lt(tt) & tt.simd_le(abs_den * tfar);
         let inv = Pf::splat(1.0) / abs_den;
-        (valid, tt * inv, u * inv, v * inv)
+        let t = tt * inv;
+        (valid & t.simd_lt(Pf::splat(f32::INFINITY)), t, u * inv, v * inv)
     }
 }

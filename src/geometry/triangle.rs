@@ -191,6 +191,25 @@ pub(crate) fn dot<T: Copy + core::ops::Mul<Output = T> + core::ops::Add<Output =
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
+/// One ray against one triangle with `test`: `(t, u, v)` in `(tnear, tfar]`, as the BVH's leaves
+/// compute it (used to measure per-triangle behaviour, e.g. double hits on shared edges).
+pub fn intersect_triangle(test: TriangleTest, ray: &crate::ray::Ray, tri: [Vec3; 3]) -> Option<(f32, f32, f32)> {
+    use super::{badouel::Badouel, moeller::Moller, watertight::Watertight};
+    fn run<K: Kernel>(b: &TriBlock, ray: &crate::ray::Ray) -> Option<(f32, f32, f32)> {
+        let r = Ray4::new(ray.origin, ray.dir);
+        K::intersect1(b, &r, &K::pre(&r), ray.tnear, ray.tfar).map(|(_, t, u, v)| (t, u, v))
+    }
+    if !ray.is_valid() {
+        return None;
+    }
+    let b = TriBlock::new(test, &[(0, 0, tri)]);
+    match test {
+        TriangleTest::MollerTrumbore => run::<Moller>(&b, ray),
+        TriangleTest::Badouel => run::<Badouel>(&b, ray),
+        TriangleTest::Watertight => run::<Watertight>(&b, ray),
+    }
+}
+
 /// Float64 Möller–Trumbore without range checks, `(t, [w0, w1, w2])` (weights of v0, v1, v2), or
 /// `None` for a ray parallel to the plane: the reference every test's `t` is measured against.
 pub fn exact_hit(origin: Vec3, dir: Vec3, tri: [Vec3; 3]) -> Option<(f64, [f64; 3])> {

@@ -75,7 +75,8 @@ fn finish(e: [f32; 3], z: [f32; 3], tnear: f32, tfar: f32) -> Option<(f32, f32, 
         return None;
     }
     let inv = 1.0 / det;
-    Some((t_s / abs_det, v * inv, w * inv))
+    let t = t_s / abs_det;
+    (t < f32::INFINITY).then_some((t, v * inv, w * inv))
 }
 
 pub(crate) struct Watertight;
@@ -133,7 +134,8 @@ impl Kernel for Watertight {
             return None;
         }
         let inv = f32x4::splat(1.0) / det;
-        nearest(valid, t_s / abs_det, v * inv, w * inv)
+        let t = t_s / abs_det;
+        nearest(valid & t.simd_lt(f32x4::splat(f32::INFINITY)), t, v * inv, w * inv)
     }
 
     /// Per lane: packets rarely share the shear of a single ray, and this test is chosen for
