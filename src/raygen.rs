@@ -134,47 +134,6 @@ impl Pcg32 {
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn cosine_directions_lie_in_the_hemisphere_with_cosine_mean() {
-        let n = Vec3::new(0.3, -0.8, 0.52).normalize();
-        let mut rng = Pcg32::new(7, 0);
-        let mut mean_cos = 0.0;
-        let count = 20_000;
-        for _ in 0..count {
-            let d = cosine_direction(n, rng.next_f32(), rng.next_f32());
-            assert!((d.length() - 1.0).abs() < 1e-5);
-            let c = d.dot(n);
-            assert!(c >= -1e-6);
-            mean_cos += c as f64;
-        }
-        // E[cos θ] under the cosine density is 2/3.
-        assert!((mean_cos / count as f64 - 2.0 / 3.0).abs() < 0.01);
-    }
-
-    #[test]
-    fn generator_is_deterministic_and_spread() {
-        let a: Vec<u32> = (0..4)
-            .map({
-                let mut g = Pcg32::new(1, 2);
-                move |_| g.next_u32()
-            })
-            .collect();
-        let b: Vec<u32> = (0..4)
-            .map({
-                let mut g = Pcg32::new(1, 2);
-                move |_| g.next_u32()
-            })
-            .collect();
-        assert_eq!(a, b);
-        let c = Pcg32::new(1, 3).next_u32();
-        assert_ne!(a[0], c);
-    }
-}
-
 /// A uniform random unit vector.
 pub fn uniform_direction(rng: &mut Pcg32) -> Vec3 {
     let z = 1.0 - 2.0 * rng.next_f32();
@@ -269,4 +228,45 @@ pub fn vertex_aimed_rays(mesh: &crate::TriangleMesh, n: usize, seed: u64) -> Vec
             (Ray::new(o, target - o), fan[v].clone())
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cosine_directions_lie_in_the_hemisphere_with_cosine_mean() {
+        let n = Vec3::new(0.3, -0.8, 0.52).normalize();
+        let mut rng = Pcg32::new(7, 0);
+        let mut mean_cos = 0.0;
+        let count = 20_000;
+        for _ in 0..count {
+            let d = cosine_direction(n, rng.next_f32(), rng.next_f32());
+            assert!((d.length() - 1.0).abs() < 1e-5);
+            let c = d.dot(n);
+            assert!(c >= -1e-6);
+            mean_cos += c as f64;
+        }
+        // E[cos θ] under the cosine density is 2/3.
+        assert!((mean_cos / count as f64 - 2.0 / 3.0).abs() < 0.01);
+    }
+
+    #[test]
+    fn generator_is_deterministic_and_spread() {
+        let a: Vec<u32> = (0..4)
+            .map({
+                let mut g = Pcg32::new(1, 2);
+                move |_| g.next_u32()
+            })
+            .collect();
+        let b: Vec<u32> = (0..4)
+            .map({
+                let mut g = Pcg32::new(1, 2);
+                move |_| g.next_u32()
+            })
+            .collect();
+        assert_eq!(a, b);
+        let c = Pcg32::new(1, 3).next_u32();
+        assert_ne!(a[0], c);
+    }
 }
