@@ -366,7 +366,7 @@ fn coherence(class: Class) -> Coherence {
     if class.coherent() { Coherence::Coherent } else { Coherence::Incoherent }
 }
 
-fn strahl_single(scene: &Scene, rays: &RayStream, class: Class, out: &mut Answers) {
+pub(crate) fn strahl_single(scene: &Scene, rays: &RayStream, class: Class, out: &mut Answers) {
     out.par_fill(|start, t, g, p| {
         for k in 0..t.len() {
             let r = rays.get(start + k);
@@ -383,7 +383,7 @@ fn strahl_single(scene: &Scene, rays: &RayStream, class: Class, out: &mut Answer
     });
 }
 
-fn strahl_packet(scene: &Scene, rays: &RayStream, class: Class, out: &mut Answers) {
+pub(crate) fn strahl_packet(scene: &Scene, rays: &RayStream, class: Class, out: &mut Answers) {
     out.par_fill(|start, t, g, p| {
         let mut hp = HitPacket::default();
         for k in (0..t.len()).step_by(PACKET_WIDTH) {
@@ -456,7 +456,7 @@ fn embree_stream_rays(rays: &RayStream) -> Vec<RTCRayHit> {
     (0..rays.len()).map(|i| RTCRayHit { ray: embree_ray(rays, i), hit: empty_hit() }).collect()
 }
 
-fn embree_single(scene: &embree::Scene, rays: &RayStream, class: Class, out: &mut Answers) {
+pub(crate) fn embree_single(scene: &embree::Scene, rays: &RayStream, class: Class, out: &mut Answers) {
     let coherent = class.coherent();
     out.par_fill(|start, t, g, p| {
         for k in 0..t.len() {
@@ -478,7 +478,7 @@ fn embree_single(scene: &embree::Scene, rays: &RayStream, class: Class, out: &mu
     });
 }
 
-fn embree_packet(scene: &embree::Scene, rays: &RayStream, class: Class, out: &mut Answers) {
+pub(crate) fn embree_packet(scene: &embree::Scene, rays: &RayStream, class: Class, out: &mut Answers) {
     let coherent = class.coherent();
     out.par_fill(|start, t, g, p| {
         let mut rh = Box::new(RTCRayHit16 {

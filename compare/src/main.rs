@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, bail};
 use clap::Parser;
 use compare::harness::{self, Answers, Class, Settings};
-use compare::{embree, rayfile, report, scenes};
+use compare::{embree, methods, rayfile, report, scenes};
 use indicatif::{ProgressBar, ProgressStyle};
 
 /// Trace the same rays with strahl and Intel Embree 3 on the same threads; report Mrays/s per
@@ -49,6 +49,13 @@ struct Args {
     /// Write the generated sphereflake to this OBJ file and exit.
     #[arg(long)]
     write_obj: Option<PathBuf>,
+    /// Also measure every triangle test × box test against Embree default and ROBUST: leaks,
+    /// edge/vertex-aimed rays, t error, agreement, speed (adds `accuracy` to the JSON and two charts).
+    #[arg(long)]
+    accuracy: bool,
+    /// Stacks and slices of the leak test's sphere (ACCURACY.md: 500 × 1000).
+    #[arg(long, default_value_t = 500)]
+    leak_stacks: u32,
     /// Exit with an error if any scene and class has hit/miss agreement below this fraction.
     #[arg(long)]
     min_agreement: Option<f64>,
@@ -93,8 +100,12 @@ fn main() -> anyhow::Result<()> {
     }
 
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
-    let settings =
-        Settings { width: args.width, passes: args.passes, keep_rays: args.dump_rays.is_some(), ..Settings::default() };
+    let settings = Settings {
+        width: args.width,
+        passes: args.passes,
+        keep_rays: args.dump_rays.is_some() || args.accuracy,
+        ..Settings::default()
+    };
     let bar = ProgressBar::new((specs.len() * 5) as u64);
     bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} {elapsed} {msg}").expect("valid template"));
     let mut results = Vec::new();
@@ -111,7 +122,34 @@ fn main() -> anyhow::Result<()> {
     }
     bar.finish_and_clear();
 
-    let rep = report::build_report(&results, args.threads, args.width, args.passes);
+    let mut rep = report::build_report(&results, args.threads, args.width, args.passes);
+    if args.accuracy {
+        let scenes_rays: Vec<methods::SceneRays> = specs
+            .iter()
+            .zip(&results)
+            .map(|(spec, r)| {
+                Ok(methods::SceneRays {
+                    meshes: spec.load()?,
+                    sets: r.ray_sets.iter().map(|(c, rays, _, e)| (*c, rays.clone(), e.clone())).collect(),
+                })
+            })
+            .collect::<anyhow::Result<_>>()?;
+        let ms = methods::Settings {
+            sphere: (args.leak_stacks, 2 * args.leak_stacks),
+            passes: args.passes.clamp(1, 3),
+            ..methods::Settings::default()
+        };
+        let bar = ProgressBar::new_spinner();
+        let acc = methods::run(&scenes_rays, &project_dir("../shared/scenes"), &pool, &device, &ms, |m| {
+            bar.set_message(format!("accuracy: {m}"));
+            bar.tick();
+        })?;
+        bar.finish_and_clear();
+        if let Err(e) = methods::charts(&args.out, &acc) {
+            eprintln!("accuracy charts skipped: {e:#}");
+        }
+        rep.accuracy = Some(acc);
+    }
     let md = report::markdown(&rep);
     println!("{md}");
     std::fs::write(args.out.join("report.md"), &md)?;

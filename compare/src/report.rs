@@ -21,6 +21,9 @@ pub struct Report {
     pub scenes: Vec<SceneJson>,
     /// Geometric mean over scenes × classes of the best-vs-best ratio.
     pub geomean_best_ratio: f64,
+    /// Every triangle test × box test against Embree's modes (with `--accuracy`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub accuracy: Option<crate::methods::AccuracyReport>,
 }
 
 #[derive(Serialize)]
@@ -132,6 +135,7 @@ pub fn build_report(results: &[SceneResult], threads: usize, width: u32, passes:
         passes,
         scenes,
         geomean_best_ratio: geomean,
+        accuracy: None,
     }
 }
 
@@ -258,6 +262,56 @@ pub fn markdown(r: &Report) -> String {
                 d.undecided,
                 pct(c.strahl_apis_consistent),
                 pct(c.embree_apis_consistent)
+            );
+        }
+    }
+    if let Some(a) = &r.accuracy {
+        let _ = writeln!(s, "\n## Methods: speed against accuracy\n");
+        let _ = writeln!(
+            s,
+            "Leak test: {}. Closed meshes for edge/vertex-aimed rays: {}.\n",
+            a.leak_test,
+            a.closed_meshes.join(", ")
+        );
+        let _ = writeln!(
+            s,
+            "| method | box test | Mrays/s primary / shadow / diffuse | leak rate at offset 0 / 1e3 / 1e4 / 1e5 / 1e6 | edge zero-hit | edge double-hit | vertex zero-hit | t ulps median / p99.9 | agree Embree default / ROBUST | watertight |"
+        );
+        let _ = writeln!(s, "|---|---|---:|---:|---:|---:|---:|---:|---:|---|");
+        let leaks = |m: &std::collections::BTreeMap<&str, f64>| {
+            crate::methods::OFFSETS.iter().map(|o| format!("{:.2e}", m[o.0])).collect::<Vec<_>>().join(" / ")
+        };
+        for m in &a.methods {
+            let _ = writeln!(
+                s,
+                "| {} | {} | {:.1} / {:.1} / {:.1} | {} | {:.2e} | {:.2e} | {:.2e} | {} / {} | {} / {} | {} |",
+                m.name,
+                m.box_test,
+                m.mrays.primary,
+                m.mrays.shadow,
+                m.mrays.diffuse,
+                leaks(&m.leak_rate),
+                m.edge_zero_hit_rate,
+                m.edge_double_hit_rate,
+                m.vertex_zero_hit_rate,
+                m.t_ulp_median,
+                m.t_ulp_p999,
+                pct(m.embree_default_agreement),
+                pct(m.embree_robust_agreement),
+                if m.watertight { "yes" } else { "no" }
+            );
+        }
+        for e in &a.embree {
+            let _ = writeln!(
+                s,
+                "| Embree {} | (Embree) | {:.1} / {:.1} / {:.1} | {} | {:.2e} | – | {:.2e} | – | – | – |",
+                e.mode,
+                e.mrays.primary,
+                e.mrays.shadow,
+                e.mrays.diffuse,
+                leaks(&e.leak_rate),
+                e.edge_zero_hit_rate,
+                e.vertex_zero_hit_rate
             );
         }
     }
