@@ -94,6 +94,10 @@ pub struct SceneRays {
     pub sets: Vec<(Class, RayStream, Answers)>,
 }
 
+/// Edge-aimed rays with their two triangles, and vertex-aimed rays with their fans.
+type EdgeRays = Vec<(Ray, [u32; 2])>;
+type VertexRays = Vec<(Ray, Vec<u32>)>;
+
 fn rate(n: usize, total: usize) -> f64 {
     if total == 0 { 0.0 } else { n as f64 / total as f64 }
 }
@@ -134,10 +138,10 @@ fn misses_embree(scene: &embree::Scene, rays: &RayStream, pool: &rayon::ThreadPo
 fn closed_meshes(shared: &std::path::Path) -> Vec<(String, TriangleMesh)> {
     let mut v = vec![("sphere 200×400".to_string(), procedural::uv_sphere(Vec3::ZERO, 1.0, 200, 400))];
     for (name, file) in [("igea", "igea/igea.obj"), ("bunny", "bunny/bunny.obj")] {
-        if let Ok(mut m) = strahl::load_obj(shared.join(file)) {
-            if !m.is_empty() {
-                v.push((name.to_string(), m.remove(0)));
-            }
+        if let Ok(mut m) = strahl::load_obj(shared.join(file))
+            && !m.is_empty()
+        {
+            v.push((name.to_string(), m.remove(0)));
         }
     }
     v
@@ -162,7 +166,7 @@ pub fn run(
         })
         .collect();
     let closed = closed_meshes(shared);
-    let aimed: Vec<(Vec<(Ray, [u32; 2])>, Vec<(Ray, Vec<u32>)>)> = closed
+    let aimed: Vec<(EdgeRays, VertexRays)> = closed
         .iter()
         .map(|(_, m)| {
             (raygen::edge_aimed_rays(m, settings.edge_rays, 3), raygen::vertex_aimed_rays(m, settings.vertex_rays, 4))
