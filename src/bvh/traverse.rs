@@ -480,7 +480,7 @@ impl Bvh {
                             if blk.prim[lane] == u32::MAX {
                                 break;
                             }
-                            let (valid, t, u, v) = K::intersect_packet(blk, lane, &rk, p, tfar, active);
+                            let (valid, t, u, v) = K::intersect_packet(blk, lane, &rk, tfar, active);
                             let mut bits = valid.to_bitmask();
                             if bits == 0 {
                                 continue;

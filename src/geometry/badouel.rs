@@ -11,7 +11,6 @@
 use glam::{DVec3, Vec3};
 
 use super::triangle::{Kernel, Ray4, RayK, TriBlock, nearest};
-use crate::ray::RayPacket;
 use crate::simd::*;
 
 /// The nine rows and the `aux` byte (axis k, normal sign) of one triangle.
@@ -86,7 +85,7 @@ impl Kernel for Badouel {
     }
 
     #[inline(always)]
-    fn intersect_packet(b: &TriBlock, lane: usize, r: &RayK, _: &RayPacket, tfar: Pf, active: Pf) -> (Pf, Pf, Pf, Pf) {
+    fn intersect_packet(b: &TriBlock, lane: usize, r: &RayK, tfar: Pf, active: Pf) -> (Pf, Pf, Pf, Pf) {
         let k = (b.aux[lane] & 3) as usize;
         let (u, v) = ((k + 1) % 3, (k + 2) % 3);
         let s = |i: usize| Pf::splat(b.rows[i][lane]);

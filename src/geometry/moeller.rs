@@ -4,7 +4,6 @@
 //! hits agree with Embree's default scenes.
 
 use super::triangle::{BLOCK, Kernel, Ray4, RayK, TriBlock, cross, dot, nearest};
-use crate::ray::RayPacket;
 use crate::simd::*;
 
 pub(crate) struct Moller;
@@ -47,7 +46,7 @@ impl Kernel for Moller {
     }
 
     #[inline(always)]
-    fn intersect_packet(b: &TriBlock, lane: usize, r: &RayK, _: &RayPacket, tfar: Pf, active: Pf) -> (Pf, Pf, Pf, Pf) {
+    fn intersect_packet(b: &TriBlock, lane: usize, r: &RayK, tfar: Pf, active: Pf) -> (Pf, Pf, Pf, Pf) {
         debug_assert!(lane < BLOCK);
         let s = |k: usize| [Pf::splat(b.rows[k][lane]), Pf::splat(b.rows[k + 1][lane]), Pf::splat(b.rows[k + 2][lane])];
         let (v0, e1, e2) = (s(0), s(3), s(6));

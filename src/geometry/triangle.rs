@@ -7,7 +7,6 @@
 
 use glam::{DVec3, Vec3};
 
-use crate::ray::RayPacket;
 use crate::simd::*;
 
 /// Triangles per leaf block (M in Embree's naming).
@@ -154,14 +153,7 @@ pub(crate) trait Kernel {
 
     /// The lanes of a packet (within `active`) hitting triangle `lane` of `b` in `(tnear, tfar]`,
     /// with their `t`, `u`, `v`.
-    fn intersect_packet(
-        b: &TriBlock,
-        lane: usize,
-        r: &RayK,
-        rays: &RayPacket,
-        tfar: Pf,
-        active: Pf,
-    ) -> (Pf, Pf, Pf, Pf);
+    fn intersect_packet(b: &TriBlock, lane: usize, r: &RayK, tfar: Pf, active: Pf) -> (Pf, Pf, Pf, Pf);
 }
 
 /// Picks the nearest valid lane of a block test: `(lane, t, u, v)`.
@@ -235,6 +227,7 @@ pub fn exact_hit(origin: Vec3, dir: Vec3, tri: [Vec3; 3]) -> Option<(f64, [f64; 
 mod tests {
     use super::super::{badouel::Badouel, moeller::Moller, watertight::Watertight};
     use super::*;
+    use crate::ray::PACKET_WIDTH;
 
     fn block1(test: TriangleTest, a: Vec3, b: Vec3, c: Vec3) -> TriBlock {
         TriBlock::new(test, &[(0, 7, [a, b, c])])
@@ -305,10 +298,8 @@ mod tests {
             d: [col(|v| v.x, &ds), col(|v| v.y, &ds), col(|v| v.z, &ds)],
             tnear: Pf::splat(0.0),
         };
-        let rays: Vec<crate::ray::Ray> = (0..PACKET_WIDTH).map(|i| crate::ray::Ray::new(os[i], ds[i])).collect();
-        let packet = RayPacket::from_rays(&rays);
         let all = Pf::splat(0.0).simd_eq(Pf::splat(0.0));
-        let (valid, t, _, _) = K::intersect_packet(&blk, 0, &rk, &packet, Pf::splat(f32::INFINITY), all);
+        let (valid, t, _, _) = K::intersect_packet(&blk, 0, &rk, Pf::splat(f32::INFINITY), all);
         let (bits, t) = (valid.to_bitmask(), t.to_array());
         let mut hits = 0;
         for i in 0..PACKET_WIDTH {

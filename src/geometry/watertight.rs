@@ -10,7 +10,6 @@
 use glam::Vec3;
 
 use super::triangle::{BLOCK, Kernel, Ray4, RayK, TriBlock, nearest};
-use crate::ray::RayPacket;
 use crate::simd::*;
 
 /// Per-ray shear: axis permutation `(kx, ky, kz)` and `(Sx, Sy, Sz)`.
@@ -39,44 +38,6 @@ impl Shear {
         }
         Self { k: [kx, ky, kz], s: [d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]] }
     }
-}
-
-/// One triangle against one ray in scalar form (used per lane by the packet form, and as the
-/// float64 fallback): `(t, u, v)`.
-#[inline(always)]
-fn scalar(v: [Vec3; 3], o: Vec3, sh: &Shear, tnear: f32, tfar: f32) -> Option<(f32, f32, f32)> {
-    let [kx, ky, kz] = sh.k;
-    let [sx, sy, sz] = sh.s;
-    let rel = v.map(|p| p - o);
-    let xy = rel.map(|p| (p[kx] - sx * p[kz], p[ky] - sy * p[kz]));
-    let (a, b, c) = (xy[0], xy[1], xy[2]);
-    let mut e = [c.0 * b.1 - c.1 * b.0, a.0 * c.1 - a.1 * c.0, b.0 * a.1 - b.1 * a.0];
-    if e.contains(&0.0) {
-        let d = |p: (f32, f32)| (p.0 as f64, p.1 as f64);
-        let (a, b, c) = (d(a), d(b), d(c));
-        e = [(c.0 * b.1 - c.1 * b.0) as f32, (a.0 * c.1 - a.1 * c.0) as f32, (b.0 * a.1 - b.1 * a.0) as f32];
-    }
-    finish(e, rel.map(|p| sz * p[kz]), tnear, tfar)
-}
-
-#[inline(always)]
-fn finish(e: [f32; 3], z: [f32; 3], tnear: f32, tfar: f32) -> Option<(f32, f32, f32)> {
-    let [u, v, w] = e;
-    if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
-        return None;
-    }
-    let det = u + v + w;
-    if det == 0.0 || det.is_nan() {
-        return None;
-    }
-    let t_scaled = u * z[0] + v * z[1] + w * z[2];
-    let (t_s, abs_det) = if det < 0.0 { (-t_scaled, -det) } else { (t_scaled, det) };
-    if !(abs_det * tnear < t_s && t_s <= abs_det * tfar) {
-        return None;
-    }
-    let inv = 1.0 / det;
-    let t = t_s / abs_det;
-    (t < f32::INFINITY).then_some((t, v * inv, w * inv))
 }
 
 pub(crate) struct Watertight;
@@ -138,31 +99,68 @@ impl Kernel for Watertight {
         nearest(valid & t.simd_lt(f32x4::splat(f32::INFINITY)), t, v * inv, w * inv)
     }
 
-    /// Per lane: packets rarely share the shear of a single ray, and this test is chosen for
-    /// robustness, not packet speed.
+    /// All lanes at once: each lane's axis permutation and shear are selected by mask, so the
+    /// arithmetic is the single-ray form's, operation for operation (bit-identical results).
     #[inline(always)]
-    fn intersect_packet(
-        b: &TriBlock,
-        lane: usize,
-        r: &RayK,
-        rays: &RayPacket,
-        tfar: Pf,
-        active: Pf,
-    ) -> (Pf, Pf, Pf, Pf) {
-        let mut bits = active.to_bitmask();
-        let (tn, tf) = (r.tnear.to_array(), tfar.to_array());
-        let tri = [b.row3(0, lane), b.row3(3, lane), b.row3(6, lane)];
-        let (mut m, mut t, mut u, mut v) = ([0.0f32; 16], [0.0f32; 16], [0.0f32; 16], [0.0f32; 16]);
-        while bits != 0 {
-            let l = bits.trailing_zeros() as usize;
-            bits &= bits - 1;
-            let ray = rays.get(l);
-            if let Some(h) = scalar(tri, ray.origin, &Shear::new(ray.dir), tn[l], tf[l]) {
-                (m[l], t[l], u[l], v[l]) = (f32::from_bits(u32::MAX), h.0, h.1, h.2);
+    fn intersect_packet(b: &TriBlock, lane: usize, r: &RayK, tfar: Pf, active: Pf) -> (Pf, Pf, Pf, Pf) {
+        let zero = Pf::splat(0.0);
+        let d = &r.d;
+        let ad = [d[0].abs(), d[1].abs(), d[2].abs()];
+        // kz = the dominant axis (ties resolved as in `Shear::new`).
+        let zx = ad[0].simd_ge(ad[1]) & ad[0].simd_ge(ad[2]);
+        let zy = !zx & ad[1].simd_ge(ad[2]);
+        // Components along kz, kz + 1 and kz + 2, then kx/ky swapped where d[kz] < 0.
+        let perm = |p: &[Pf; 3]| -> [Pf; 3] {
+            let z = zx.select(p[0], zy.select(p[1], p[2]));
+            let x = zx.select(p[1], zy.select(p[2], p[0]));
+            let y = zx.select(p[2], zy.select(p[0], p[1]));
+            [x, y, z]
+        };
+        let [dx0, dy0, dz] = perm(d);
+        let neg = dz.simd_lt(zero);
+        let swap = |p: [Pf; 3]| [neg.select(p[1], p[0]), neg.select(p[0], p[1]), p[2]];
+        let [dx, dy, _] = swap([dx0, dy0, dz]);
+        let (sx, sy, sz) = (dx / dz, dy / dz, Pf::splat(1.0) / dz);
+        let rel = |first: usize| -> [Pf; 3] {
+            swap(perm(&std::array::from_fn(|a| Pf::splat(b.rows[first + a][lane]) - r.o[a])))
+        };
+        let (a, bb, c) = (rel(0), rel(3), rel(6));
+        let shear = |p: &[Pf; 3]| (p[0] - sx * p[2], p[1] - sy * p[2]);
+        let ((ax, ay), (bx, by), (cx, cy)) = (shear(&a), shear(&bb), shear(&c));
+        let mut u = cx * by - cy * bx;
+        let mut v = ax * cy - ay * cx;
+        let mut w = bx * ay - by * ax;
+        // Exactly-zero edge functions: recompute those lanes in float64, as the single-ray form.
+        let zeros = (active & (u.simd_eq(zero) | v.simd_eq(zero) | w.simd_eq(zero))).to_bitmask();
+        if zeros != 0 {
+            let (mut ua, mut va, mut wa) = (u.to_array(), v.to_array(), w.to_array());
+            let g = |x: Pf| x.to_array();
+            let (axa, aya, bxa, bya, cxa, cya) = (g(ax), g(ay), g(bx), g(by), g(cx), g(cy));
+            let mut bits = zeros;
+            while bits != 0 {
+                let l = bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                let (ax, ay, bx, by, cx, cy) =
+                    (axa[l] as f64, aya[l] as f64, bxa[l] as f64, bya[l] as f64, cxa[l] as f64, cya[l] as f64);
+                ua[l] = (cx * by - cy * bx) as f32;
+                va[l] = (ax * cy - ay * cx) as f32;
+                wa[l] = (bx * ay - by * ax) as f32;
             }
+            (u, v, w) = (Pf::new(ua), Pf::new(va), Pf::new(wa));
         }
-        // `m` holds all-ones (NaN) bits in hit lanes; NaN != 0 makes a full lane mask.
-        let valid = Pf::new(m).simd_ne(Pf::splat(0.0));
-        (valid, Pf::new(t), Pf::new(u), Pf::new(v))
+        let negs = u.simd_lt(zero) | v.simd_lt(zero) | w.simd_lt(zero);
+        let poss = u.simd_gt(zero) | v.simd_gt(zero) | w.simd_gt(zero);
+        let det = u + v + w;
+        let valid = active & !(negs & poss) & det.simd_ne(zero);
+        if valid.to_bitmask() == 0 {
+            return (valid, zero, zero, zero);
+        }
+        let t_scaled = u * (sz * a[2]) + v * (sz * bb[2]) + w * (sz * c[2]);
+        let t_s = t_scaled ^ (det & Pf::splat(-0.0));
+        let abs_det = det.abs();
+        let valid = valid & (abs_det * r.tnear).simd_lt(t_s) & t_s.simd_le(abs_det * tfar);
+        let inv = Pf::splat(1.0) / det;
+        let t = t_s / abs_det;
+        (valid & t.simd_lt(Pf::splat(f32::INFINITY)), t, v * inv, w * inv)
     }
 }
