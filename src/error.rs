@@ -25,7 +25,7 @@ pub enum Error {
     IndexOutOfRange { triangle: usize, index: u32, vertex_count: usize },
     #[error("mesh has {0} triangles; at most 2^32 - 1 are supported")]
     TooManyTriangles(usize),
-    #[error("scene has {0} geometries; at most 2^32 - 1 are supported")]
+    #[error("scene has {0} geometries; at most 2^32 - 1 are supported (2^29 with the Badouel test)")]
     TooManyGeometries(usize),
 }
 

@@ -143,3 +143,19 @@ fn streams_of_any_length() {
         }
     }
 }
+
+#[test]
+fn geometry_ids_for_every_method() {
+    // Three unit spheres along x; a ray down onto each must report that sphere's geometry id.
+    let meshes: Vec<_> =
+        (0..3).map(|g| procedural::uv_sphere(Vec3::new(3.0 * g as f32, 0.0, 0.0), 1.0, 8, 16)).collect();
+    for t in TriangleTest::ALL {
+        let scene = Scene::build(meshes.clone(), &BuildConfig::default().with_tests(t, BoxTest::Conservative)).unwrap();
+        for g in 0..3u32 {
+            let r = Ray::new(Vec3::new(3.0 * g as f32 + 0.1, 5.0, 0.05), Vec3::new(0.0, -1.0, 0.0));
+            let h = scene.intersect(&r).unwrap_or_else(|| panic!("{t:?}: sphere {g} missed"));
+            assert_eq!(h.geom_id, g, "{t:?}");
+            assert!(h.ng.normalize().y > 0.5, "{t:?}: the normal of the top of a sphere points up: {}", h.ng);
+        }
+    }
+}

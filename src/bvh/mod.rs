@@ -18,7 +18,7 @@ pub use traverse::BoxTest;
 
 use crate::error::{Error, Result};
 use crate::geometry::TriangleMesh;
-use crate::geometry::triangle::{BLOCK, TriBlock, TriangleTest};
+use crate::geometry::triangle::{BADOUEL_MAX_GEOMETRIES, BLOCK, TriBlock, TriangleTest};
 
 /// Figures the builder reports.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -58,7 +58,9 @@ impl Bvh {
     /// Builds over every hittable triangle of `meshes` on the current rayon pool.
     pub fn build(meshes: &[TriangleMesh], cfg: &BuildConfig) -> Result<Bvh> {
         let start = Instant::now();
-        if meshes.len() >= u32::MAX as usize {
+        let max_geometries =
+            if cfg.triangle_test == TriangleTest::Badouel { BADOUEL_MAX_GEOMETRIES } else { u32::MAX as usize };
+        if meshes.len() >= max_geometries {
             return Err(Error::TooManyGeometries(meshes.len()));
         }
         // Primitive references: (geometry, triangle) pairs packed into one global id.

@@ -299,7 +299,14 @@ impl Bvh {
     pub fn hit_record(&self, h: &LeafHit) -> Hit {
         let b = &self.blocks[h.block as usize];
         let lane = h.lane as usize;
-        Hit { t: h.t, u: h.u, v: h.v, ng: b.ng(self.test, lane), prim_id: b.prim[lane], geom_id: b.geom[lane] }
+        Hit {
+            t: h.t,
+            u: h.u,
+            v: h.v,
+            ng: b.ng(self.test, lane),
+            prim_id: b.prim[lane],
+            geom_id: b.geom_id(self.test, lane),
+        }
     }
 
     /// The closest hit by testing every block, with this BVH's triangle test.

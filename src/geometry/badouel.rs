@@ -13,7 +13,7 @@ use glam::{DVec3, Vec3};
 use super::triangle::{Kernel, Ray4, RayK, TriBlock, nearest};
 use crate::simd::*;
 
-/// The nine rows and the `aux` byte (axis k, normal sign) of one triangle.
+/// The nine rows and the aux bits (axis k, normal sign) of one triangle.
 pub(crate) fn precompute(a: Vec3, b: Vec3, c: Vec3) -> ([f32; 9], u8) {
     let (a, b, c): (DVec3, DVec3, DVec3) = (a.as_dvec3(), b.as_dvec3(), c.as_dvec3());
     let (e1, e2) = (b - a, c - a);
@@ -38,8 +38,8 @@ pub(crate) fn precompute(a: Vec3, b: Vec3, c: Vec3) -> ([f32; 9], u8) {
 
 /// The geometric normal of lane `lane`, scaled so that its dominant component is ±1.
 pub(crate) fn normal(b: &TriBlock, lane: usize) -> Vec3 {
-    let k = (b.aux[lane] & 3) as usize;
-    let sign = if b.aux[lane] & 4 != 0 { -1.0 } else { 1.0 };
+    let k = ((b.aux(lane) & 3) as usize).min(2);
+    let sign = if b.aux(lane) & 4 != 0 { -1.0 } else { 1.0 };
     let mut n = Vec3::ZERO;
     n[k] = 1.0;
     n[(k + 1) % 3] = b.rows[0][lane];
@@ -58,7 +58,7 @@ impl Kernel for Badouel {
     #[inline(always)]
     fn intersect1(b: &TriBlock, r: &Ray4, _: &(), tnear: f32, tfar: f32) -> Option<(usize, f32, f32, f32)> {
         // Per lane, the ray's components along k, u = k + 1 and v = k + 2.
-        let kf = f32x4::new(b.aux.map(|a| (a & 3) as f32));
+        let kf = f32x4::new(std::array::from_fn(|l| (b.aux(l) & 3) as f32));
         let (k0, k1) = (kf.simd_eq(f32x4::splat(0.0)), kf.simd_eq(f32x4::splat(1.0)));
         let sel = |x: f32x4, y: f32x4, z: f32x4| k0.select(x, k1.select(y, z));
         let (o, d) = (&r.o, &r.d);
@@ -86,7 +86,7 @@ impl Kernel for Badouel {
 
     #[inline(always)]
     fn intersect_packet(b: &TriBlock, lane: usize, r: &RayK, tfar: Pf, active: Pf) -> (Pf, Pf, Pf, Pf) {
-        let k = (b.aux[lane] & 3) as usize;
+        let k = ((b.aux(lane) & 3) as usize).min(2);
         let (u, v) = ((k + 1) % 3, (k + 2) % 3);
         let s = |i: usize| Pf::splat(b.rows[i][lane]);
         let den = r.d[k] + s(0) * r.d[u] + s(1) * r.d[v];

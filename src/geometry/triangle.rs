@@ -49,28 +49,28 @@ impl TriangleTest {
 
 /// [`BLOCK`] triangles in SoA form. What the nine rows hold depends on the test:
 /// Möller–Trumbore `v0, e1 = v0 − v1, e2 = v2 − v0` (Embree's `Triangle4`); watertight `v0, v1, v2`;
-/// Badouel `n_u, n_v, n_d, β_u, β_v, β_d, γ_u, γ_v, γ_d` with the projection axis and normal sign in
-/// `aux`. Unused lanes hold NaN, which fails every depth test, and `prim = u32::MAX`.
+/// Badouel `n_u, n_v, n_d, β_u, β_v, β_d, γ_u, γ_v, γ_d`, with the projection axis and the normal's
+/// sign in the top [`AUX_BITS`] bits of `geom` (so blocks stay 176 bytes for every test). Unused
+/// lanes hold NaN, which fails every depth test, and `prim = u32::MAX`.
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(16))]
 pub(crate) struct TriBlock {
     pub rows: [[f32; BLOCK]; 9],
     pub geom: [u32; BLOCK],
     pub prim: [u32; BLOCK],
-    /// Badouel: bits 0–1 the dropped axis k, bit 2 set when the normal's k component is negative.
-    pub aux: [u8; BLOCK],
 }
+
+/// Bits at the top of a Badouel block's geometry ids holding the axis k (2 bits) and normal sign.
+pub(crate) const AUX_BITS: u32 = 3;
+/// Geometry ids a Badouel scene can hold.
+pub(crate) const BADOUEL_MAX_GEOMETRIES: usize = 1 << (32 - AUX_BITS);
 
 impl TriBlock {
     /// Packs up to [`BLOCK`] triangles `(geom_id, prim_id, corners)` for `test`.
     pub fn new(test: TriangleTest, tris: &[(u32, u32, [Vec3; 3])]) -> Self {
-        let mut b = TriBlock {
-            rows: [[f32::NAN; BLOCK]; 9],
-            geom: [u32::MAX; BLOCK],
-            prim: [u32::MAX; BLOCK],
-            aux: [0; BLOCK],
-        };
+        let mut b = TriBlock { rows: [[f32::NAN; BLOCK]; 9], geom: [u32::MAX; BLOCK], prim: [u32::MAX; BLOCK] };
         for (lane, &(g, p, [a, bb, c])) in tris.iter().take(BLOCK).enumerate() {
+            b.geom[lane] = g;
             let rows: [f32; 9] = match test {
                 TriangleTest::MollerTrumbore => {
                     let (e1, e2) = (a - bb, c - a);
@@ -79,17 +79,31 @@ impl TriBlock {
                 TriangleTest::Watertight => [a.x, a.y, a.z, bb.x, bb.y, bb.z, c.x, c.y, c.z],
                 TriangleTest::Badouel => {
                     let (rows, aux) = super::badouel::precompute(a, bb, c);
-                    b.aux[lane] = aux;
+                    b.geom[lane] = (g & (u32::MAX >> AUX_BITS)) | ((aux as u32) << (32 - AUX_BITS));
                     rows
                 }
             };
             for (r, v) in b.rows.iter_mut().zip(rows) {
                 r[lane] = v;
             }
-            b.geom[lane] = g;
             b.prim[lane] = p;
         }
         b
+    }
+
+    /// The geometry id of lane `lane` (without Badouel's extra bits).
+    #[inline(always)]
+    pub fn geom_id(&self, test: TriangleTest, lane: usize) -> u32 {
+        match test {
+            TriangleTest::Badouel => self.geom[lane] & (u32::MAX >> AUX_BITS),
+            _ => self.geom[lane],
+        }
+    }
+
+    /// Badouel's axis and sign bits of lane `lane`.
+    #[inline(always)]
+    pub fn aux(&self, lane: usize) -> u8 {
+        (self.geom[lane] >> (32 - AUX_BITS)) as u8
     }
 
     #[inline(always)]
