@@ -200,3 +200,68 @@ fn degenerate_rays_with_every_method() {
         }
     }
 }
+
+/// Slivers and tiny triangles (ACCURACY.md test 4): a fan of 1:1000 slivers and a grid of tiny
+/// triangles, seen from ever farther away. Criterion: against a float64 brute-force reference
+/// (ties within 1e-6 relative t count as matches), Möller–Trumbore and the watertight test match
+/// the primitive of at least 99% of the hits up to a distance of 1e2; every rate is printed. (Measured:
+/// about 98.8% at 1e3, 93% at 1e4, and under 50% from 1e5 on for every test, where the ray origin's
+/// ulp exceeds the slivers' width.)
+#[test]
+fn slivers_and_tiny_triangles_by_distance() {
+    let mut p = Vec::new();
+    let mut idx = Vec::new();
+    // 400 slivers 1 long and 1e-3 wide around the origin.
+    for i in 0..400u32 {
+        let a = i as f32 / 400.0 * std::f32::consts::TAU;
+        let (d, s) = (Vec3::new(a.cos(), a.sin(), 0.0), Vec3::new(-a.sin(), a.cos(), 0.0) * 1e-3);
+        let b = p.len() as u32;
+        p.extend([Vec3::ZERO + d * 0.01, d + s, d - s]);
+        idx.push([b, b + 1, b + 2]);
+    }
+    // A 40×40 grid of triangles 1e-4 across just behind.
+    for j in 0..40 {
+        for i in 0..40 {
+            let o = Vec3::new(-0.002 + i as f32 * 1e-4, -0.002 + j as f32 * 1e-4, -0.01);
+            let b = p.len() as u32;
+            p.extend([o, o + Vec3::new(1e-4, 0.0, 0.0), o + Vec3::new(0.0, 1e-4, 0.0)]);
+            idx.push([b, b + 1, b + 2]);
+        }
+    }
+    let mesh = TriangleMesh::new("slivers", p, idx).unwrap();
+    let reference = |r: &Ray| -> Option<(u32, f64)> {
+        (0..mesh.triangle_count())
+            .filter_map(|i| {
+                let (t, b) = strahl::exact_hit(r.origin, r.dir, mesh.triangle(i))?;
+                (b.iter().all(|&x| x >= 0.0) && t > r.tnear as f64 && t <= r.tfar as f64).then_some((i as u32, t))
+            })
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+    };
+    for distance in [1.0f32, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6] {
+        let eye = Vec3::new(0.3, 0.2, 1.0).normalize() * distance;
+        // A narrow camera aimed at the slivers, so that the scene fills the image at any distance.
+        let fov = 2.0 * (1.2 / distance).atan().to_degrees();
+        let cam = Camera::look_at(eye, Vec3::ZERO, Vec3::Y, fov);
+        let (rays, _) = raygen::primary(&cam, 64, 64);
+        let refs: Vec<Option<(u32, f64)>> = (0..rays.len()).map(|i| reference(&rays.get(i))).collect();
+        let n_ref = refs.iter().filter(|r| r.is_some()).count();
+        assert!(n_ref > 100, "distance {distance}: too few reference hits ({n_ref})");
+        for test in TriangleTest::ALL {
+            let scene = build(&mesh, test, BoxTest::Conservative);
+            let mut matched = 0;
+            for (i, want) in refs.iter().enumerate() {
+                let Some((prim, t64)) = *want else { continue };
+                if let Some(h) = scene.intersect(&rays.get(i)) {
+                    let tie = strahl::exact_hit(rays.get(i).origin, rays.get(i).dir, mesh.triangle(h.prim_id as usize))
+                        .is_some_and(|(t, _)| (t - t64).abs() <= 1e-6 * t64.abs());
+                    matched += (h.prim_id == prim || tie) as usize;
+                }
+            }
+            let rate = matched as f64 / n_ref as f64;
+            eprintln!("distance {distance:e} {test:?}: primitive match {:.4} of {n_ref}", rate);
+            if distance <= 1e2 && test != TriangleTest::Badouel {
+                assert!(rate >= 0.99, "{test:?} at distance {distance}: match rate {rate}");
+            }
+        }
+    }
+}
