@@ -56,25 +56,9 @@ pub struct Accuracy {
     pub worst: Vec<Case>,
 }
 
-/// Float64 Möller–Trumbore without range checks: `(t, [w, u, v])`, or `None` for a ray parallel
-/// to the plane.
+/// Float64 Möller–Trumbore without range checks (strahl's reference, [`strahl::exact_hit`]).
 pub fn exact(ray: &Ray, tri: [Vec3; 3]) -> Option<(f64, [f64; 3])> {
-    let o = ray.origin.as_dvec3();
-    let d = ray.dir.as_dvec3();
-    let [a, b, c] = tri.map(|p| p.as_dvec3());
-    let e1 = b - a;
-    let e2 = c - a;
-    let p = d.cross(e2);
-    let det = e1.dot(p);
-    if det == 0.0 || !det.is_finite() {
-        return None;
-    }
-    let s = o - a;
-    let u = s.dot(p) / det;
-    let q = s.cross(e1);
-    let v = d.dot(q) / det;
-    let t = e2.dot(q) / det;
-    Some((t, [1.0 - u - v, u, v]))
+    strahl::exact_hit(ray.origin, ray.dir, tri)
 }
 
 fn min3(b: [f64; 3]) -> f64 {

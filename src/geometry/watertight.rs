@@ -9,7 +9,7 @@
 
 use glam::Vec3;
 
-use super::triangle::{BLOCK, Kernel, Ray4, RayK, TriBlock, nearest};
+use super::triangle::{Kernel, Ray4, RayK, TriBlock, nearest};
 use crate::simd::*;
 
 /// Per-ray shear: axis permutation `(kx, ky, kz)` and `(Sx, Sy, Sz)`.
@@ -40,6 +40,22 @@ impl Shear {
     }
 }
 
+/// The float64 fallback of the paper: the edge functions `[U, V, W]` of the lanes in `zeros`
+/// recomputed from the sheared corners `[ax, ay, bx, by, cx, cy]` in double precision.
+#[inline(never)]
+fn edges_f64<const N: usize>(zeros: u32, e: [[f32; N]; 3], c: [[f32; N]; 6]) -> ([f32; N], [f32; N], [f32; N]) {
+    let [mut u, mut v, mut w] = e;
+    for l in 0..N {
+        if zeros & (1 << l) != 0 {
+            let [ax, ay, bx, by, cx, cy] = c.map(|x| x[l] as f64);
+            u[l] = (cx * by - cy * bx) as f32;
+            v[l] = (ax * cy - ay * cx) as f32;
+            w[l] = (bx * ay - by * ax) as f32;
+        }
+    }
+    (u, v, w)
+}
+
 pub(crate) struct Watertight;
 
 impl Kernel for Watertight {
@@ -65,18 +81,8 @@ impl Kernel for Watertight {
         // Exactly-zero edge functions: recompute those lanes in float64.
         let zeros = (u.simd_eq(zero) | v.simd_eq(zero) | w.simd_eq(zero)).to_bitmask();
         if zeros != 0 {
-            let (mut ua, mut va, mut wa) = (u.to_array(), v.to_array(), w.to_array());
             let g = |x: f32x4| x.to_array();
-            let (axa, aya, bxa, bya, cxa, cya) = (g(ax), g(ay), g(bx), g(by), g(cx), g(cy));
-            for l in 0..BLOCK {
-                if zeros & (1 << l) != 0 {
-                    let (ax, ay, bx, by, cx, cy) =
-                        (axa[l] as f64, aya[l] as f64, bxa[l] as f64, bya[l] as f64, cxa[l] as f64, cya[l] as f64);
-                    ua[l] = (cx * by - cy * bx) as f32;
-                    va[l] = (ax * cy - ay * cx) as f32;
-                    wa[l] = (bx * ay - by * ax) as f32;
-                }
-            }
+            let (ua, va, wa) = edges_f64(zeros, [g(u), g(v), g(w)], [g(ax), g(ay), g(bx), g(by), g(cx), g(cy)]);
             (u, v, w) = (f32x4::new(ua), f32x4::new(va), f32x4::new(wa));
         }
         let neg = u.simd_lt(zero) | v.simd_lt(zero) | w.simd_lt(zero);
@@ -133,19 +139,8 @@ impl Kernel for Watertight {
         // Exactly-zero edge functions: recompute those lanes in float64, as the single-ray form.
         let zeros = (active & (u.simd_eq(zero) | v.simd_eq(zero) | w.simd_eq(zero))).to_bitmask();
         if zeros != 0 {
-            let (mut ua, mut va, mut wa) = (u.to_array(), v.to_array(), w.to_array());
             let g = |x: Pf| x.to_array();
-            let (axa, aya, bxa, bya, cxa, cya) = (g(ax), g(ay), g(bx), g(by), g(cx), g(cy));
-            let mut bits = zeros;
-            while bits != 0 {
-                let l = bits.trailing_zeros() as usize;
-                bits &= bits - 1;
-                let (ax, ay, bx, by, cx, cy) =
-                    (axa[l] as f64, aya[l] as f64, bxa[l] as f64, bya[l] as f64, cxa[l] as f64, cya[l] as f64);
-                ua[l] = (cx * by - cy * bx) as f32;
-                va[l] = (ax * cy - ay * cx) as f32;
-                wa[l] = (bx * ay - by * ax) as f32;
-            }
+            let (ua, va, wa) = edges_f64(zeros, [g(u), g(v), g(w)], [g(ax), g(ay), g(bx), g(by), g(cx), g(cy)]);
             (u, v, w) = (Pf::new(ua), Pf::new(va), Pf::new(wa));
         }
         let negs = u.simd_lt(zero) | v.simd_lt(zero) | w.simd_lt(zero);
