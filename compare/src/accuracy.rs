@@ -8,8 +8,21 @@ use strahl::{Ray, RayStream, TriangleMesh};
 use crate::harness::Answers;
 
 /// Barycentric distance from an edge below which a disagreement counts as an edge or vertex tie:
-/// f32 Möller–Trumbore decides such rays by rounding, so either answer is legitimate.
+/// f32 Möller–Trumbore decides such rays by rounding, so either answer is legitimate. This is the
+/// floor; [`edge_tolerance`] raises it where the coordinates are large against the triangle.
 pub const EDGE_TOL: f64 = 1e-5;
+
+/// The barycentric tie tolerance for `ray` against `tri`: the f32 edge functions carry absolute
+/// errors of a few ulps of the coordinates involved (origin and corners), which in barycentric
+/// terms is that error over the triangle's size. 64 ulps, never below [`EDGE_TOL`].
+pub fn edge_tolerance(ray: &Ray, tri: [Vec3; 3]) -> f64 {
+    let mag = tri.iter().map(|p| p.abs().max_element()).fold(ray.origin.abs().max_element(), f32::max) as f64;
+    let size = ((tri[1] - tri[0]).cross(tri[2] - tri[0]).length() as f64).sqrt();
+    if size <= 0.0 || !size.is_finite() {
+        return EDGE_TOL;
+    }
+    (64.0 * f32::EPSILON as f64 * mag / size).max(EDGE_TOL)
+}
 /// Relative distance between two candidate hits, or from a ray bound, below which they tie.
 pub const DEPTH_TOL: f64 = 1e-5;
 /// Occlusion disagreements decided by a float64 brute-force pass over all triangles, at most.
@@ -67,14 +80,14 @@ fn min3(b: [f64; 3]) -> f64 {
 
 /// Whether the float64 hit `(t, b)` is inside the triangle and the ray interval, with a margin:
 /// `Some(true)` clearly a hit, `Some(false)` clearly not, `None` within tolerance of a boundary.
-fn decide(ray: &Ray, h: Option<(f64, [f64; 3])>) -> (Option<bool>, &'static str) {
+fn decide(ray: &Ray, tri: [Vec3; 3], h: Option<(f64, [f64; 3])>) -> (Option<bool>, &'static str) {
     let Some((t, b)) = h else {
         return (Some(false), "parallel");
     };
     let m = min3(b);
     let (tn, tf) = (ray.tnear as f64, ray.tfar as f64);
     let scale = t.abs().max(1e-30);
-    if m.abs() <= EDGE_TOL {
+    if m.abs() <= edge_tolerance(ray, tri) {
         return (None, "edge_or_vertex");
     }
     if (t - tn).abs() <= DEPTH_TOL * scale || (tf.is_finite() && (t - tf).abs() <= DEPTH_TOL * scale) {
@@ -128,9 +141,9 @@ pub fn compare(meshes: &[TriangleMesh], rays: &RayStream, occlusion: bool, s: &A
                 }
             } else {
                 let (g, p) = if sh { (sa.1, sa.2) } else { (ea.1, ea.2) };
-                match look.tri(g, p).map(|t| exact(&ray, t)) {
-                    Some(h) => {
-                        let (clear, kind) = decide(&ray, h);
+                match look.tri(g, p).map(|t| (t, exact(&ray, t))) {
+                    Some((tri, h)) => {
+                        let (clear, kind) = decide(&ray, tri, h);
                         let (t64, mb) = h.map(|(t, b)| (t, min3(b))).unwrap_or((f64::NAN, f64::NAN));
                         match clear {
                             None => (if kind == "depth" { "depth_tie" } else { "edge_or_vertex_tie" }, mb, t64),
@@ -162,13 +175,14 @@ pub fn compare(meshes: &[TriangleMesh], rays: &RayStream, occlusion: bool, s: &A
             continue;
         }
         acc.prim_disagreements += 1;
-        let hs = look.tri(sa.1, sa.2).and_then(|t| exact(&ray, t));
-        let he = look.tri(ea.1, ea.2).and_then(|t| exact(&ray, t));
-        let (verdict, minb, t64) = match (hs, he) {
-            (Some((ts, bs)), Some((te, be))) => {
+        let (ts3, te3) = (look.tri(sa.1, sa.2), look.tri(ea.1, ea.2));
+        let hs = ts3.and_then(|t| exact(&ray, t));
+        let he = te3.and_then(|t| exact(&ray, t));
+        let (verdict, minb, t64) = match (hs, he, ts3, te3) {
+            (Some((ts, bs)), Some((te, be)), Some(tri_s), Some(tri_e)) => {
                 let scale = ts.abs().max(te.abs()).max(1e-30);
                 let mb = min3(bs).min(min3(be));
-                if min3(bs).abs() <= EDGE_TOL || min3(be).abs() <= EDGE_TOL {
+                if min3(bs).abs() <= edge_tolerance(&ray, tri_s) || min3(be).abs() <= edge_tolerance(&ray, tri_e) {
                     ("edge_or_vertex_tie", mb, ts.min(te))
                 } else if (ts - te).abs() <= DEPTH_TOL * scale {
                     ("depth_tie", mb, ts.min(te))
@@ -225,8 +239,9 @@ fn brute_force_occlusion(meshes: &[TriangleMesh], ray: &Ray) -> (bool, Option<&'
             if !m.is_hittable(i) {
                 continue;
             }
-            let h = exact(ray, m.triangle(i));
-            match decide(ray, h) {
+            let tri = m.triangle(i);
+            let h = exact(ray, tri);
+            match decide(ray, tri, h) {
                 (Some(true), _) => {
                     let (t, b) = h.expect("decided hits exist");
                     return (true, None, t, min3(b));
@@ -256,8 +271,11 @@ mod tests {
         let (t, b) = exact(&r, tri).unwrap();
         assert!((t - 2.0).abs() < 1e-12);
         assert!((b[1] - 0.25).abs() < 1e-12 && (b[2] - 0.5).abs() < 1e-12);
-        assert_eq!(decide(&r, Some((t, b))).0, Some(true));
+        assert_eq!(decide(&r, tri, Some((t, b))).0, Some(true));
         let edge = Ray::new(Vec3::new(0.5, 0.0, 2.0), Vec3::new(0.0, 0.0, -1.0));
-        assert_eq!(decide(&edge, exact(&edge, tri)).0, None);
+        assert_eq!(decide(&edge, tri, exact(&edge, tri)).0, None);
+        // Far from the origin the tolerance grows with the coordinates.
+        let far = [Vec3::splat(1e4), Vec3::splat(1e4) + Vec3::X, Vec3::splat(1e4) + Vec3::Y];
+        assert!(edge_tolerance(&r, far) > 100.0 * edge_tolerance(&r, tri));
     }
 }
