@@ -155,13 +155,11 @@ pub fn compare(meshes: &[TriangleMesh], rays: &RayStream, occlusion: bool, s: &A
                     None => (if sh { "strahl_error" } else { "embree_error" }, f64::NAN, f64::NAN),
                 }
             };
-            tally(&mut acc.classified, verdict);
-            let sev = if verdict.ends_with("error") { 0 } else { 1 };
-            cases.push((
-                sev,
-                -minb.abs(),
+            record(
+                &mut acc.classified,
+                &mut cases,
                 Case { ray: i, kind: "hit_miss", verdict, strahl: sa, embree: ea, min_barycentric: minb, t64 },
-            ));
+            );
             continue;
         }
         if !sh || occlusion {
@@ -197,13 +195,11 @@ pub fn compare(meshes: &[TriangleMesh], rays: &RayStream, occlusion: bool, s: &A
             }
             _ => ("undecided", f64::NAN, f64::NAN),
         };
-        tally(&mut acc.classified, verdict);
-        let sev = if verdict.ends_with("error") { 0 } else { 2 };
-        cases.push((
-            sev,
-            -minb.abs(),
+        record(
+            &mut acc.classified,
+            &mut cases,
             Case { ray: i, kind: "primitive", verdict, strahl: sa, embree: ea, min_barycentric: minb, t64 },
-        ));
+        );
     }
     acc.hit_miss_agreement = if n == 0 { 1.0 } else { 1.0 - acc.hit_miss_disagreements as f64 / n as f64 };
     acc.prim_agreement = if both == 0 { 1.0 } else { same_prim as f64 / both as f64 };
@@ -217,6 +213,20 @@ pub fn compare(meshes: &[TriangleMesh], rays: &RayStream, occlusion: bool, s: &A
     cases.sort_by(|a, b| a.0.cmp(&b.0).then(b.1.total_cmp(&a.1)));
     acc.worst = cases.into_iter().take(5).map(|c| c.2).collect();
     acc
+}
+
+/// Counts a decided disagreement and keeps it for the worst-case list: errors first, then
+/// hit/miss before primitive disagreements, nearest to an edge last.
+fn record(d: &mut Disagreements, cases: &mut Vec<(u8, f64, Case)>, case: Case) {
+    tally(d, case.verdict);
+    let sev = if case.verdict.ends_with("error") {
+        0
+    } else if case.kind == "hit_miss" {
+        1
+    } else {
+        2
+    };
+    cases.push((sev, -case.min_barycentric.abs(), case));
 }
 
 fn tally(d: &mut Disagreements, verdict: &str) {
