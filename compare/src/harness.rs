@@ -170,8 +170,37 @@ pub struct BuildResult {
     pub strahl_inner_nodes: usize,
     pub strahl_leaves: usize,
     pub strahl_depth: usize,
-    /// Embree 3 exposes no memory statistics through its API.
+    /// Embree's own statistics (`verbose=2`, read from a child process): SAH cost and BVH bytes
+    /// per triangle at MEDIUM, SAH at HIGH. `None` if they could not be read.
     pub embree_bytes_per_tri: Option<f64>,
+    pub embree_sah: Option<f64>,
+    pub embree_high_sah: Option<f64>,
+}
+
+/// Embree's BVH statistics for a scene, as `[(sah, bytes per primitive)]` for MEDIUM then HIGH:
+/// Embree 3 has no API for them, but prints them on a `verbose=2` device, so the harness runs
+/// itself as a child (`--embree-stats-of`) and reads the `total : sah = …, #bytes/prim = …` lines.
+pub fn embree_stats(spec: &SceneSpec, threads: usize) -> Option<Vec<(f64, f64)>> {
+    let arg = match &spec.source {
+        crate::scenes::Source::Obj(p) => p.to_string_lossy().into_owned(),
+        crate::scenes::Source::Sphereflake { .. } => "sphereflake".to_string(),
+    };
+    let exe = std::env::current_exe().ok()?;
+    let out = std::process::Command::new(exe)
+        .args(["--threads", &threads.to_string(), "--embree-stats-of", &arg])
+        .output()
+        .ok()?;
+    let text = String::from_utf8_lossy(&out.stdout);
+    let stats: Vec<(f64, f64)> = text
+        .lines()
+        .filter(|l| l.trim_start().starts_with("total") && l.contains("sah =") && l.contains("#bytes/prim"))
+        .filter_map(|l| {
+            let num =
+                |key: &str| l.split(key).nth(1)?.split_whitespace().next()?.trim_end_matches(',').parse::<f64>().ok();
+            Some((num("sah =")?, num("#bytes/prim =")?))
+        })
+        .collect();
+    (stats.len() >= 2).then_some(stats)
 }
 
 pub struct SceneResult {
@@ -246,6 +275,8 @@ pub fn run_scene(
         strahl_leaves: st.leaves,
         strahl_depth: st.depth,
         embree_bytes_per_tri: None,
+        embree_sah: None,
+        embree_high_sah: None,
     };
 
     // Ray sets, all derived from strahl's primary hits so both engines trace identical rays.

@@ -56,6 +56,10 @@ struct Args {
     /// Stacks and slices of the leak test's sphere (ACCURACY.md: 500 × 1000).
     #[arg(long, default_value_t = 500)]
     leak_stacks: u32,
+    /// Internal: build SCENE (an OBJ path or `sphereflake`) with Embree at MEDIUM and HIGH on a
+    /// verbose device and let Embree print its BVH statistics (read by the parent harness).
+    #[arg(long, hide = true)]
+    embree_stats_of: Option<String>,
     /// Exit with an error if any scene and class has hit/miss agreement below this fraction.
     #[arg(long)]
     min_agreement: Option<f64>,
@@ -73,6 +77,15 @@ fn main() -> anyhow::Result<()> {
     let args = Args::parse();
     if let Some(p) = &args.write_obj {
         return write_sphereflake(p);
+    }
+    if let Some(scene) = &args.embree_stats_of {
+        let spec = if scene == "sphereflake" { scenes::sphereflake() } else { scenes::from_path(Path::new(scene))? };
+        let meshes = spec.load()?;
+        let device = embree::Device::new(&format!("threads={},verbose=2", args.threads))?;
+        for q in [embree::Quality::Medium, embree::Quality::High] {
+            embree::Scene::build(&device, &meshes, q, false)?;
+        }
+        return Ok(());
     }
     if args.threads == 0 || args.width == 0 {
         bail!("--threads and --width must be positive");
@@ -110,10 +123,15 @@ fn main() -> anyhow::Result<()> {
     bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} {elapsed} {msg}").expect("valid template"));
     let mut results = Vec::new();
     for spec in &specs {
-        let r = harness::run_scene(spec, &pool, &device, &settings, |step| {
+        let mut r = harness::run_scene(spec, &pool, &device, &settings, |step| {
             bar.set_message(format!("{}: {step}", spec.name));
             bar.inc(1);
         })?;
+        if let Some(stats) = harness::embree_stats(spec, args.threads) {
+            r.build.embree_sah = Some(stats[0].0);
+            r.build.embree_bytes_per_tri = Some(stats[0].1);
+            r.build.embree_high_sah = Some(stats[1].0);
+        }
         report::write_image(&args.out.join(format!("{}.png", r.name)), &r.image, r.width)?;
         if let Some(dir) = &args.dump_rays {
             dump(dir, spec, &r)?;

@@ -220,14 +220,15 @@ pub fn markdown(r: &Report) -> String {
     let _ = writeln!(s, "\n## Build (2 threads, best of repeats)\n");
     let _ = writeln!(
         s,
-        "| scene | triangles | strahl ms | Embree MEDIUM ms | ratio | Embree HIGH ms | strahl SAH | strahl B/tri | nodes | leaves | depth |"
+        "| scene | triangles | strahl ms | Embree MEDIUM ms | ratio | Embree HIGH ms | SAH strahl / Embree MEDIUM / HIGH | B/tri strahl / Embree | nodes | leaves | depth |"
     );
     let _ = writeln!(s, "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+    let opt = |x: Option<f64>| x.map(|v| format!("{v:.1}")).unwrap_or_else(|| "–".into());
     for sc in &r.scenes {
         let b = &sc.build;
         let _ = writeln!(
             s,
-            "| {} | {} | {:.1} | {:.1} | {:.2}× | {:.1} | {:.1} | {:.1} | {} | {} | {} |",
+            "| {} | {} | {:.1} | {:.1} | {:.2}× | {:.1} | {:.1} / {} / {} | {:.1} / {} | {} | {} | {} |",
             sc.name,
             sc.triangles,
             b.strahl_ms,
@@ -235,7 +236,10 @@ pub fn markdown(r: &Report) -> String {
             sc.build_ratio,
             b.embree_high_ms,
             b.strahl_sah,
+            opt(b.embree_sah),
+            opt(b.embree_high_sah),
             b.strahl_bytes_per_tri,
+            opt(b.embree_bytes_per_tri),
             b.strahl_inner_nodes,
             b.strahl_leaves,
             b.strahl_depth
