@@ -383,16 +383,12 @@ pub(crate) fn build(prims: &mut [PrimRef], cfg: &BuildConfig) -> Option<(Aabb, B
     }
     let cfg = cfg.clamped();
     let root = set_of(prims, 0);
-    let node = recurse(root, prims, &cfg, 0);
+    let node = recurse_at(root, prims, 0, &cfg, 0);
     Some((root.bounds, node))
 }
 
 /// Builds the subtree of `set`. `prims` is the slice that `set` indexes into, starting at index
 /// `base` of the whole reference array; ranges stored in the result are absolute.
-fn recurse(set: Set, prims: &mut [PrimRef], cfg: &BuildConfig, depth: usize) -> BuildNode {
-    recurse_at(set, prims, 0, cfg, depth)
-}
-
 fn recurse_at(set: Set, prims: &mut [PrimRef], base: usize, cfg: &BuildConfig, depth: usize) -> BuildNode {
     let local = Set { start: set.start - base, ..set };
     let make_leaf = || BuildNode::Leaf { start: set.start, count: set.count };
@@ -443,11 +439,11 @@ fn recurse_at(set: Set, prims: &mut [PrimRef], base: usize, cfg: &BuildConfig, d
     for s in &sets {
         let (_, tail) = rest.split_at_mut(s.start - offset);
         let (piece, tail) = tail.split_at_mut(s.count);
-        pieces.push((Set { start: s.start + base, ..*s }, piece, s.start + base));
+        pieces.push((Set { start: s.start + base, ..*s }, piece));
         rest = tail;
         offset = s.start + s.count;
     }
-    let build_child = |(s, piece, b): (Set, &mut [PrimRef], usize)| (s.bounds, recurse_at(s, piece, b, cfg, depth + 1));
+    let build_child = |(s, piece): (Set, &mut [PrimRef])| (s.bounds, recurse_at(s, piece, s.start, cfg, depth + 1));
     let built: Vec<(Aabb, BuildNode)> = if set.count >= cfg.parallel_threshold {
         pieces.into_par_iter().map(build_child).collect()
     } else {

@@ -221,9 +221,8 @@ fn order_children<const ANY: bool>(
 struct Frustum {
     near: [usize; 3],
     far: [usize; 3],
-    /// The shared origin, per axis, subtracted from the near and far planes.
-    o_near: [f32x8; 3],
-    o_far: [f32x8; 3],
+    /// The shared origin, per axis.
+    o: [f32x8; 3],
     rmin: [f32x8; 3],
     rmax: [f32x8; 3],
     tnear: f32x8,
@@ -239,8 +238,7 @@ impl Frustum {
         let mut f = Frustum {
             near: [0; 3],
             far: [0; 3],
-            o_near: [f32x8::splat(0.0); 3],
-            o_far: [f32x8::splat(0.0); 3],
+            o: [f32x8::splat(0.0); 3],
             rmin: [f32x8::splat(0.0); 3],
             rmax: [f32x8::splat(0.0); 3],
             tnear: f32x8::splat(hmin(live_mask.select(tnear, inf))),
@@ -264,8 +262,7 @@ impl Frustum {
             // Near plane: the box minimum for positive directions, mirrored for negative ones.
             f.near[a] = 2 * a + negative as usize;
             f.far[a] = 2 * a + 1 - negative as usize;
-            f.o_near[a] = f32x8::splat(o0);
-            f.o_far[a] = f32x8::splat(o0);
+            f.o[a] = f32x8::splat(o0);
             f.rmin[a] = f32x8::splat(rmin);
             f.rmax[a] = f32x8::splat(rmax);
         }
@@ -278,8 +275,8 @@ impl Frustum {
         let mut tn = self.tnear;
         let mut tf = f32x8::splat(tfar_max);
         for a in 0..3 {
-            let pn = f32x8::new(b[self.near[a]]) - self.o_near[a];
-            let pf = f32x8::new(b[self.far[a]]) - self.o_far[a];
+            let pn = f32x8::new(b[self.near[a]]) - self.o[a];
+            let pf = f32x8::new(b[self.far[a]]) - self.o[a];
             tn = tn.fast_max((pn * self.rmin[a]).fast_min(pn * self.rmax[a]));
             tf = tf.fast_min((pf * self.rmin[a]).fast_max(pf * self.rmax[a]));
         }
