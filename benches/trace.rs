@@ -8,6 +8,7 @@ use std::path::Path;
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use glam::Vec3;
+use strahl::Query;
 use strahl::{
     BuildConfig, Camera, Coherence, HitPacket, HitStream, PACKET_WIDTH, RayStream, Scene, TriangleMesh, procedural,
     raygen,

@@ -25,6 +25,10 @@ pub enum Error {
     IndexOutOfRange { triangle: usize, index: u32, vertex_count: usize },
     #[error("mesh has {0} triangles; at most 2^32 - 1 are supported")]
     TooManyTriangles(usize),
+    #[error("instance {instance} places object {object}, but there are only {objects} objects")]
+    UnknownObject { instance: usize, object: usize, objects: usize },
+    #[error("instance {instance} has a transform that is not finite and invertible")]
+    BadTransform { instance: usize },
     #[error("scene has {0} geometries; at most 2^32 - 1 are supported (2^29 with the Badouel test)")]
     TooManyGeometries(usize),
 }

@@ -5,7 +5,7 @@
 //! queried by single rays, 16-ray packets and streams, for the closest hit or any hit.
 //!
 //! ```
-//! use strahl::{BuildConfig, Ray, Scene, TriangleMesh};
+//! use strahl::{BuildConfig, Query, Ray, Scene, TriangleMesh};
 //! use glam::Vec3;
 //!
 //! // One triangle in the plane z = 0.
@@ -32,6 +32,7 @@ pub mod bvh;
 pub mod camera;
 pub mod error;
 pub mod geometry;
+pub mod instance;
 pub mod procedural;
 pub mod ray;
 pub mod raygen;
@@ -42,8 +43,9 @@ pub use bvh::{BoxTest, BuildConfig, BuildStats};
 pub use camera::Camera;
 pub use error::{Error, Result};
 pub use geometry::{TriangleMesh, TriangleTest, exact_hit, intersect_triangle, load_obj};
+pub use instance::{Instance, InstancedScene, InstancedStats};
 pub use ray::{Hit, HitPacket, HitStream, INVALID_ID, PACKET_WIDTH, Ray, RayPacket, RayStream, offset_ray_origin};
-pub use scene::{Coherence, STREAM_CHUNK, Scene};
+pub use scene::{Coherence, Query, STREAM_CHUNK, Scene};
 
 /// The README's code examples run as doctests.
 #[cfg(doctest)]

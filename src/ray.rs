@@ -93,8 +93,11 @@ pub struct Hit {
     pub ng: Vec3,
     /// Index of the triangle within its geometry.
     pub prim_id: u32,
-    /// Index of the geometry (mesh) within the scene.
+    /// Index of the geometry (mesh) within the scene, or within the instanced object.
     pub geom_id: u32,
+    /// Index of the instance that was hit in an [`InstancedScene`](crate::InstancedScene);
+    /// [`INVALID_ID`] in a flat [`Scene`](crate::Scene) (Embree's `instID`).
+    pub inst_id: u32,
 }
 
 /// The smallest largest-component magnitude of a valid ray direction (see [`Ray::is_valid`]).
@@ -188,6 +191,7 @@ pub struct HitPacket {
     pub ng_z: [f32; PACKET_WIDTH],
     pub prim_id: [u32; PACKET_WIDTH],
     pub geom_id: [u32; PACKET_WIDTH],
+    pub inst_id: [u32; PACKET_WIDTH],
 }
 
 impl Default for HitPacket {
@@ -201,6 +205,7 @@ impl Default for HitPacket {
             ng_z: [0.0; PACKET_WIDTH],
             prim_id: [INVALID_ID; PACKET_WIDTH],
             geom_id: [INVALID_ID; PACKET_WIDTH],
+            inst_id: [INVALID_ID; PACKET_WIDTH],
         }
     }
 }
@@ -215,6 +220,7 @@ impl HitPacket {
             ng: Vec3::new(self.ng_x[lane], self.ng_y[lane], self.ng_z[lane]),
             prim_id: self.prim_id[lane],
             geom_id: self.geom_id[lane],
+            inst_id: self.inst_id[lane],
         })
     }
 
@@ -230,11 +236,13 @@ impl HitPacket {
                 self.ng_z[lane] = h.ng.z;
                 self.prim_id[lane] = h.prim_id;
                 self.geom_id[lane] = h.geom_id;
+                self.inst_id[lane] = h.inst_id;
             }
             None => {
                 self.t[lane] = f32::INFINITY;
                 self.prim_id[lane] = INVALID_ID;
                 self.geom_id[lane] = INVALID_ID;
+                self.inst_id[lane] = INVALID_ID;
             }
         }
     }
@@ -341,6 +349,7 @@ pub struct HitStream {
     pub ng_z: Vec<f32>,
     pub prim_id: Vec<u32>,
     pub geom_id: Vec<u32>,
+    pub inst_id: Vec<u32>,
 }
 
 impl HitStream {
@@ -355,6 +364,7 @@ impl HitStream {
             ng_z: vec![0.0; n],
             prim_id: vec![INVALID_ID; n],
             geom_id: vec![INVALID_ID; n],
+            inst_id: vec![INVALID_ID; n],
         }
     }
 
@@ -378,7 +388,7 @@ impl HitStream {
         fill(&mut self.ng_x, 0.0);
         fill(&mut self.ng_y, 0.0);
         fill(&mut self.ng_z, 0.0);
-        for ids in [&mut self.prim_id, &mut self.geom_id] {
+        for ids in [&mut self.prim_id, &mut self.geom_id, &mut self.inst_id] {
             ids.clear();
             ids.resize(n, INVALID_ID);
         }
@@ -393,6 +403,7 @@ impl HitStream {
             ng: Vec3::new(self.ng_x[i], self.ng_y[i], self.ng_z[i]),
             prim_id: self.prim_id[i],
             geom_id: self.geom_id[i],
+            inst_id: self.inst_id[i],
         })
     }
 
@@ -408,11 +419,13 @@ impl HitStream {
                 self.ng_z[i] = h.ng.z;
                 self.prim_id[i] = h.prim_id;
                 self.geom_id[i] = h.geom_id;
+                self.inst_id[i] = h.inst_id;
             }
             None => {
                 self.t[i] = f32::INFINITY;
                 self.prim_id[i] = INVALID_ID;
                 self.geom_id[i] = INVALID_ID;
+                self.inst_id[i] = INVALID_ID;
             }
         }
     }

@@ -1,4 +1,4 @@
-//! The public query API: a built [`Scene`] answers closest-hit (`intersect*`) and any-hit
+//! The public query API: the [`Query`] trait, and the flat [`Scene`]. A built scene answers closest-hit (`intersect*`) and any-hit
 //! (`occluded*`) queries for single rays, packets and streams, serially or in parallel.
 //!
 //! A `Scene` is immutable once built, `Send + Sync`, and can be queried from many threads at once.
@@ -8,7 +8,7 @@ use std::path::Path;
 use glam::Vec3;
 use rayon::prelude::*;
 
-use crate::bvh::traverse::PacketHits;
+use crate::bvh::traverse::LeafHit;
 use crate::bvh::{BoxTest, BuildConfig, BuildStats, Bvh};
 use crate::error::Result;
 use crate::geometry::TriangleTest;
@@ -72,141 +72,152 @@ impl Scene {
         self.meshes.iter().map(|m| m.triangle_count()).sum()
     }
 
-    /// The closest hit of `ray` in `(tnear, tfar]`, or `None`. Invalid rays (see
-    /// [`Ray::is_valid`]) miss.
-    pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
+    /// The closest hit by testing every triangle, with the same triangle test as the BVH: the
+    /// reference the BVH is tested against. O(triangles) per ray.
+    pub fn intersect_brute_force(&self, ray: &Ray) -> Option<Hit> {
+        self.bvh.brute_force(ray).map(|h| self.bvh.hit_record(&h))
+    }
+
+    pub(crate) fn bvh(&self) -> &Bvh {
+        &self.bvh
+    }
+}
+
+impl Query for Scene {
+    fn intersect(&self, ray: &Ray) -> Option<Hit> {
         self.bvh.trace1::<false>(ray).map(|h| self.bvh.hit_record(&h))
     }
 
-    /// Whether anything lies on `ray` in `(tnear, tfar]`. Invalid rays are not occluded.
-    pub fn occluded(&self, ray: &Ray) -> bool {
+    fn occluded(&self, ray: &Ray) -> bool {
         self.bvh.trace1::<true>(ray).is_some()
     }
 
-    /// Closest hits of the active lanes of `rays`; inactive lanes are written as misses.
-    pub fn intersect_packet(&self, rays: &RayPacket, hits: &mut HitPacket) {
+    fn intersect_packet_each(&self, rays: &RayPacket, mut f: impl FnMut(usize, &Hit)) {
         let r = self.bvh.trace_packet::<false>(rays);
-        *hits = HitPacket::default();
-        for lane in 0..PACKET_WIDTH {
-            if r.mask & (1 << lane) != 0 {
-                hits.set(lane, Some(self.packet_hit(&r, lane)));
-            }
+        let mut bits = r.mask;
+        while bits != 0 {
+            let lane = bits.trailing_zeros() as usize;
+            bits &= bits - 1;
+            let h = LeafHit { block: r.block[lane], lane: r.lane[lane], t: r.t[lane], u: r.u[lane], v: r.v[lane] };
+            f(lane, &self.bvh.hit_record(&h));
         }
     }
 
-    /// Bit mask of the active lanes of `rays` that are occluded.
-    pub fn occluded_packet(&self, rays: &RayPacket) -> u32 {
+    fn occluded_packet(&self, rays: &RayPacket) -> u32 {
         self.bvh.trace_packet::<true>(rays).mask
     }
+}
 
-    fn packet_hit(&self, r: &PacketHits, lane: usize) -> Hit {
-        let h = crate::bvh::traverse::LeafHit {
-            block: r.block[lane],
-            lane: r.lane[lane],
-            t: r.t[lane],
-            u: r.u[lane],
-            v: r.v[lane],
-        };
-        self.bvh.hit_record(&h)
+/// The queries every scene answers: closest hit (`intersect*`) and any hit (`occluded*`) for
+/// single rays, packets and streams, serially or in parallel. Implemented by the flat [`Scene`]
+/// and the two-level [`InstancedScene`](crate::InstancedScene); stream queries are written once,
+/// here, on top of the single-ray and packet queries.
+pub trait Query: Sync {
+    /// The closest hit of `ray` in `(tnear, tfar]`, or `None`. Invalid rays (see
+    /// [`Ray::is_valid`]) miss.
+    fn intersect(&self, ray: &Ray) -> Option<Hit>;
+
+    /// Whether anything lies on `ray` in `(tnear, tfar]`. Invalid rays are not occluded.
+    fn occluded(&self, ray: &Ray) -> bool;
+
+    /// Calls `f(lane, hit)` for every active lane of `rays` that hits something (closest hit).
+    fn intersect_packet_each(&self, rays: &RayPacket, f: impl FnMut(usize, &Hit));
+
+    /// Bit mask of the active lanes of `rays` that are occluded.
+    fn occluded_packet(&self, rays: &RayPacket) -> u32;
+
+    /// Closest hits of the active lanes of `rays`; inactive lanes are written as misses.
+    fn intersect_packet(&self, rays: &RayPacket, hits: &mut HitPacket) {
+        *hits = HitPacket::default();
+        self.intersect_packet_each(rays, |lane, h| hits.set(lane, Some(*h)));
     }
 
     /// Closest hits of every ray of a stream; `hits` is resized to the stream's length.
-    pub fn intersect_stream(&self, rays: &RayStream, hits: &mut HitStream, coherence: Coherence) {
+    fn intersect_stream(&self, rays: &RayStream, hits: &mut HitStream, coherence: Coherence) {
         hits.reset(rays.len());
-        self.intersect_range(rays, 0, HitSlice::of(hits), coherence);
+        intersect_range(self, rays, 0, HitSlice::of(hits), coherence);
     }
 
     /// Occlusion of every ray of a stream; `occluded` is resized to the stream's length.
-    pub fn occluded_stream(&self, rays: &RayStream, occluded: &mut Vec<bool>, coherence: Coherence) {
+    fn occluded_stream(&self, rays: &RayStream, occluded: &mut Vec<bool>, coherence: Coherence) {
         occluded.clear();
         occluded.resize(rays.len(), false);
-        self.occluded_range(rays, 0, occluded, coherence);
+        occluded_range(self, rays, 0, occluded, coherence);
     }
 
     /// [`intersect_stream`](Self::intersect_stream) spread over the current rayon pool in chunks
     /// of [`STREAM_CHUNK`] rays.
-    pub fn intersect_stream_par(&self, rays: &RayStream, hits: &mut HitStream, coherence: Coherence) {
+    fn intersect_stream_par(&self, rays: &RayStream, hits: &mut HitStream, coherence: Coherence) {
         hits.reset(rays.len());
         let c = STREAM_CHUNK;
         let h = hits;
         (
-            h.t.par_chunks_mut(c),
-            h.u.par_chunks_mut(c),
-            h.v.par_chunks_mut(c),
-            h.ng_x.par_chunks_mut(c),
-            h.ng_y.par_chunks_mut(c),
-            h.ng_z.par_chunks_mut(c),
-            h.prim_id.par_chunks_mut(c),
-            h.geom_id.par_chunks_mut(c),
+            (h.t.par_chunks_mut(c), h.u.par_chunks_mut(c), h.v.par_chunks_mut(c)),
+            (h.ng_x.par_chunks_mut(c), h.ng_y.par_chunks_mut(c), h.ng_z.par_chunks_mut(c)),
+            (h.prim_id.par_chunks_mut(c), h.geom_id.par_chunks_mut(c), h.inst_id.par_chunks_mut(c)),
         )
             .into_par_iter()
             .enumerate()
-            .for_each(|(i, (t, u, v, ng_x, ng_y, ng_z, prim_id, geom_id))| {
-                let out = HitSlice { t, u, v, ng_x, ng_y, ng_z, prim_id, geom_id };
-                self.intersect_range(rays, i * c, out, coherence);
+            .for_each(|(i, ((t, u, v), (ng_x, ng_y, ng_z), (prim_id, geom_id, inst_id)))| {
+                let out = HitSlice { t, u, v, ng_x, ng_y, ng_z, prim_id, geom_id, inst_id };
+                intersect_range(self, rays, i * c, out, coherence);
             });
     }
 
     /// [`occluded_stream`](Self::occluded_stream) spread over the current rayon pool.
-    pub fn occluded_stream_par(&self, rays: &RayStream, occluded: &mut Vec<bool>, coherence: Coherence) {
+    fn occluded_stream_par(&self, rays: &RayStream, occluded: &mut Vec<bool>, coherence: Coherence) {
         occluded.clear();
         occluded.resize(rays.len(), false);
         occluded
             .par_chunks_mut(STREAM_CHUNK)
             .enumerate()
-            .for_each(|(i, out)| self.occluded_range(rays, i * STREAM_CHUNK, out, coherence));
+            .for_each(|(i, out)| occluded_range(self, rays, i * STREAM_CHUNK, out, coherence));
     }
+}
 
-    /// Rays `start..start + out.len()` of `rays` into `out`.
-    fn intersect_range(&self, rays: &RayStream, start: usize, mut out: HitSlice<'_>, coherence: Coherence) {
-        let n = out.len();
-        match coherence {
-            Coherence::Coherent => {
-                for k in (0..n).step_by(PACKET_WIDTH) {
-                    let p = rays.packet(start + k, (n - k).min(PACKET_WIDTH));
-                    let r = self.bvh.trace_packet::<false>(&p);
-                    let mut bits = r.mask;
-                    while bits != 0 {
-                        let lane = bits.trailing_zeros() as usize;
-                        bits &= bits - 1;
-                        out.set(k + lane, &self.packet_hit(&r, lane));
-                    }
-                }
+/// Rays `start..start + out.len()` of `rays` into `out`.
+fn intersect_range<Q: Query + ?Sized>(
+    q: &Q,
+    rays: &RayStream,
+    start: usize,
+    mut out: HitSlice<'_>,
+    coherence: Coherence,
+) {
+    let n = out.len();
+    match coherence {
+        Coherence::Coherent => {
+            for k in (0..n).step_by(PACKET_WIDTH) {
+                let p = rays.packet(start + k, (n - k).min(PACKET_WIDTH));
+                q.intersect_packet_each(&p, |lane, h| out.set(k + lane, h));
             }
-            Coherence::Incoherent => {
-                for k in 0..n {
-                    if let Some(h) = self.intersect(&rays.get(start + k)) {
-                        out.set(k, &h);
-                    }
+        }
+        Coherence::Incoherent => {
+            for k in 0..n {
+                if let Some(h) = q.intersect(&rays.get(start + k)) {
+                    out.set(k, &h);
                 }
             }
         }
     }
+}
 
-    fn occluded_range(&self, rays: &RayStream, start: usize, out: &mut [bool], coherence: Coherence) {
-        let n = out.len();
-        match coherence {
-            Coherence::Coherent => {
-                for k in (0..n).step_by(PACKET_WIDTH) {
-                    let m = (n - k).min(PACKET_WIDTH);
-                    let bits = self.occluded_packet(&rays.packet(start + k, m));
-                    for (lane, o) in out[k..k + m].iter_mut().enumerate() {
-                        *o = bits & (1 << lane) != 0;
-                    }
-                }
-            }
-            Coherence::Incoherent => {
-                for (k, o) in out.iter_mut().enumerate() {
-                    *o = self.occluded(&rays.get(start + k));
+fn occluded_range<Q: Query + ?Sized>(q: &Q, rays: &RayStream, start: usize, out: &mut [bool], coherence: Coherence) {
+    let n = out.len();
+    match coherence {
+        Coherence::Coherent => {
+            for k in (0..n).step_by(PACKET_WIDTH) {
+                let m = (n - k).min(PACKET_WIDTH);
+                let bits = q.occluded_packet(&rays.packet(start + k, m));
+                for (lane, o) in out[k..k + m].iter_mut().enumerate() {
+                    *o = bits & (1 << lane) != 0;
                 }
             }
         }
-    }
-
-    /// The closest hit by testing every triangle, with the same triangle test as the BVH: the
-    /// reference the BVH is tested against. O(triangles) per ray.
-    pub fn intersect_brute_force(&self, ray: &Ray) -> Option<Hit> {
-        self.bvh.brute_force(ray).map(|h| self.bvh.hit_record(&h))
+        Coherence::Incoherent => {
+            for (k, o) in out.iter_mut().enumerate() {
+                *o = q.occluded(&rays.get(start + k));
+            }
+        }
     }
 }
 
@@ -220,6 +231,7 @@ struct HitSlice<'a> {
     ng_z: &'a mut [f32],
     prim_id: &'a mut [u32],
     geom_id: &'a mut [u32],
+    inst_id: &'a mut [u32],
 }
 
 impl<'a> HitSlice<'a> {
@@ -233,6 +245,7 @@ impl<'a> HitSlice<'a> {
             ng_z: &mut h.ng_z,
             prim_id: &mut h.prim_id,
             geom_id: &mut h.geom_id,
+            inst_id: &mut h.inst_id,
         }
     }
 
@@ -251,5 +264,6 @@ impl<'a> HitSlice<'a> {
         self.ng_z[i] = h.ng.z;
         self.prim_id[i] = h.prim_id;
         self.geom_id[i] = h.geom_id;
+        self.inst_id[i] = h.inst_id;
     }
 }

@@ -4,6 +4,7 @@
 mod common;
 
 use glam::Vec3;
+use strahl::Query;
 use strahl::raygen::{self, Offset};
 use strahl::{
     BoxTest, BuildConfig, Camera, Coherence, HitStream, Ray, RayStream, Scene, TriangleMesh, TriangleTest, procedural,

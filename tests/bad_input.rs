@@ -4,6 +4,7 @@ mod common;
 
 use common::*;
 use glam::Vec3;
+use strahl::Query;
 use strahl::{BuildConfig, Coherence, Error, HitPacket, HitStream, Ray, RayPacket, RayStream, Scene, TriangleMesh};
 
 fn tmp(name: &str, text: &str) -> std::path::PathBuf {

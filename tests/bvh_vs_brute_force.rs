@@ -4,6 +4,7 @@ mod common;
 
 use common::*;
 use glam::Vec3;
+use strahl::Query;
 use strahl::{
     BoxTest, BuildConfig, Camera, Coherence, HitStream, Ray, RayStream, Scene, TriangleTest, procedural, raygen,
 };

@@ -5,6 +5,7 @@ mod common;
 
 use common::*;
 use glam::Vec3;
+use strahl::Query;
 use strahl::{Camera, Coherence, HitPacket, HitStream, PACKET_WIDTH, Ray, RayPacket, RayStream, Scene, raygen};
 
 fn all_apis_agree(scene: &Scene, rays: &RayStream, what: &str) {

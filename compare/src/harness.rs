@@ -8,8 +8,8 @@ use glam::Vec3;
 use rayon::prelude::*;
 use serde::Serialize;
 use strahl::{
-    BuildConfig, Camera, Coherence, HitPacket, HitStream, INVALID_ID, PACKET_WIDTH, RayStream, Scene, TriangleMesh,
-    raygen,
+    BuildConfig, Camera, Coherence, HitPacket, HitStream, INVALID_ID, PACKET_WIDTH, Query, RayStream, Scene,
+    TriangleMesh, raygen,
 };
 
 use crate::accuracy::{self, Accuracy};

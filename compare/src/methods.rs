@@ -11,7 +11,7 @@ use glam::Vec3;
 use serde::Serialize;
 use strahl::raygen;
 use strahl::{
-    BoxTest, BuildConfig, Coherence, HitStream, Ray, RayStream, Scene, TriangleMesh, TriangleTest, procedural,
+    BoxTest, BuildConfig, Coherence, HitStream, Query, Ray, RayStream, Scene, TriangleMesh, TriangleTest, procedural,
 };
 
 use crate::embree;

@@ -21,7 +21,7 @@ use glam::Vec3;
 
 use super::Bvh;
 use super::build::MEDIAN_DEPTH;
-use super::node::{EMPTY, WIDTH, is_leaf, leaf_blocks};
+use super::node::{EMPTY, Node, WIDTH, is_leaf, leaf_blocks};
 use crate::geometry::badouel::Badouel;
 use crate::geometry::moeller::Moller;
 use crate::geometry::triangle::{BLOCK, Kernel, Ray4, RayK, TriangleTest};
@@ -106,7 +106,7 @@ impl Default for PacketHits {
 
 /// Fixed-size traversal stack; no kernel allocates. Each thread keeps one (see [`with_stack`]):
 /// zero-filling 4 KB on every ray cost more than a tenth of a primary ray's traversal.
-struct Stack {
+pub(crate) struct Stack {
     node: [u32; STACK],
     dist: [f32; STACK],
     len: usize,
@@ -154,15 +154,30 @@ impl Stack {
 
 thread_local! {
     static STACK_TLS: RefCell<Stack> = const { RefCell::new(Stack::EMPTY) };
-    /// Packets have their own, so that a packet kernel may trace single rays.
-    static PACKET_STACK: RefCell<Stack> = const { RefCell::new(Stack::EMPTY) };
+    /// The instance level has its own, so that its leaves may walk the objects' BVHs.
+    static TOP_STACK: RefCell<Stack> = const { RefCell::new(Stack::EMPTY) };
 }
 
 /// Runs `f` with this thread's traversal stack, reset to hold `root` (a fresh one if the thread's
 /// stack is already in use, which only re-entrant use could cause).
 #[inline(always)]
 fn with_stack<R>(root: u32, f: impl FnOnce(&mut Stack) -> R) -> R {
-    STACK_TLS.with(|cell| match cell.try_borrow_mut() {
+    with_stack_in(&STACK_TLS, root, f)
+}
+
+/// [`with_stack`] for the instance level.
+#[inline(always)]
+pub(crate) fn with_top_stack<R>(root: u32, f: impl FnOnce(&mut Stack) -> R) -> R {
+    with_stack_in(&TOP_STACK, root, f)
+}
+
+#[inline(always)]
+fn with_stack_in<R>(
+    key: &'static std::thread::LocalKey<RefCell<Stack>>,
+    root: u32,
+    f: impl FnOnce(&mut Stack) -> R,
+) -> R {
+    key.with(|cell| match cell.try_borrow_mut() {
         Ok(mut s) => {
             s.reset(root);
             f(&mut s)
@@ -303,6 +318,7 @@ impl Bvh {
             ng: b.ng(self.test, lane),
             prim_id: b.prim[lane],
             geom_id: b.geom_id(self.test, lane),
+            inst_id: crate::ray::INVALID_ID,
         }
     }
 
@@ -355,59 +371,22 @@ impl Bvh {
     ) -> Option<LeafHit> {
         let r4 = Ray4::new(ray.origin, ray.dir);
         let pre = K::pre(&r4);
-        let rdir = Vec3::new(safe_rcp(ray.dir.x), safe_rcp(ray.dir.y), safe_rcp(ray.dir.z));
-        let ordir = ray.origin * rdir;
-        let rd = [f32x8::splat(rdir.x), f32x8::splat(rdir.y), f32x8::splat(rdir.z)];
-        let od = [f32x8::splat(ordir.x), f32x8::splat(ordir.y), f32x8::splat(ordir.z)];
-        // Row of the near plane per axis: the box minimum where the direction is positive.
-        let near = [(rdir.x < 0.0) as usize, 2 + (rdir.y < 0.0) as usize, 4 + (rdir.z < 0.0) as usize];
-        let far = [near[0] ^ 1, near[1] ^ 1, near[2] ^ 1];
-        let tnear = f32x8::splat(ray.tnear);
-        let pad = f32x8::splat(WIDEN * ordir.abs().max_element());
-        let widen = f32x8::splat(1.0 + WIDEN);
+        let br = BoxRay::new(ray);
         let mut tfar = ray.tfar;
         let mut best = None;
-
-        'pop: while let Some((mut cur, dist)) = stack.pop() {
-            // Skip subtrees entered beyond the closest hit so far.
-            if dist > tfar {
-                continue;
-            }
-            loop {
-                if is_leaf(cur) {
-                    let (start, count) = leaf_blocks(cur);
-                    for bi in start..start + count {
-                        if let Some((lane, t, u, v)) = K::intersect1(&self.blocks[bi], &r4, &pre, ray.tnear, tfar) {
-                            tfar = t;
-                            best = Some(LeafHit { block: bi as u32, lane: lane as u32, t, u, v });
-                            if ANY {
-                                return best;
-                            }
-                        }
+        walk1::<ANY, CONS>(&self.nodes, &br, stack, &mut tfar, |leaf, tfar| {
+            let (start, count) = leaf_blocks(leaf);
+            for bi in start..start + count {
+                if let Some((lane, t, u, v)) = K::intersect1(&self.blocks[bi], &r4, &pre, ray.tnear, *tfar) {
+                    *tfar = t;
+                    best = Some(LeafHit { block: bi as u32, lane: lane as u32, t, u, v });
+                    if ANY {
+                        return true;
                     }
-                    continue 'pop;
-                }
-                let node = &self.nodes[cur as usize];
-                let b = &node.bounds;
-                // Slab test of all children at once.
-                let tnx = f32x8::new(b[near[0]]).mul_sub(rd[0], od[0]);
-                let tny = f32x8::new(b[near[1]]).mul_sub(rd[1], od[1]);
-                let tnz = f32x8::new(b[near[2]]).mul_sub(rd[2], od[2]);
-                let tfx = f32x8::new(b[far[0]]).mul_sub(rd[0], od[0]);
-                let tfy = f32x8::new(b[far[1]]).mul_sub(rd[1], od[1]);
-                let tfz = f32x8::new(b[far[2]]).mul_sub(rd[2], od[2]);
-                let tn = tnx.fast_max(tny).fast_max(tnz.fast_max(tnear));
-                let tf = tfx.fast_min(tfy).fast_min(tfz.fast_min(f32x8::splat(tfar)));
-                let mask = if CONS { tn.simd_le(tf.mul_add(widen, pad)) } else { tn.simd_le(tf) }.to_bitmask();
-                if mask == 0 {
-                    continue 'pop;
-                }
-                match order_children::<ANY>(stack, &node.child, mask, &tn.to_array()) {
-                    Some(next) => cur = next,
-                    None => continue 'pop,
                 }
             }
-        }
+            false
+        });
         best
     }
 
@@ -435,14 +414,164 @@ impl Bvh {
         stack: &mut Stack,
     ) -> PacketHits {
         let mut out = PacketHits::default();
+        if self.root == EMPTY {
+            return out;
+        }
+        let Some((pb, mut tfar)) = PacketBoxes::new(p) else {
+            return out;
+        };
+        let rk = RayK { o: pb.o, d: pb.d, tnear: pb.tnear };
+        walk_packet::<ANY, CONS>(&self.nodes, &pb, stack, &mut tfar, |leaf, tfar| {
+            let (start, count) = leaf_blocks(leaf);
+            let active = pb.tnear.simd_le(*tfar);
+            for bi in start..start + count {
+                let blk = &self.blocks[bi];
+                for lane in 0..BLOCK {
+                    if blk.prim[lane] == u32::MAX {
+                        break;
+                    }
+                    let (valid, t, u, v) = K::intersect_packet(blk, lane, &rk, *tfar, active);
+                    let mut bits = valid.to_bitmask();
+                    if bits == 0 {
+                        continue;
+                    }
+                    if ANY {
+                        // Occluded lanes are finished: close their interval.
+                        out.mask |= bits;
+                        *tfar = valid.select(Pf::splat(f32::NEG_INFINITY), *tfar);
+                        if out.mask == pb.live {
+                            return true;
+                        }
+                        continue;
+                    }
+                    *tfar = valid.select(t, *tfar);
+                    let (t, u, v) = (t.to_array(), u.to_array(), v.to_array());
+                    out.mask |= bits;
+                    while bits != 0 {
+                        let l = bits.trailing_zeros() as usize;
+                        bits &= bits - 1;
+                        out.t[l] = t[l];
+                        out.u[l] = u[l];
+                        out.v[l] = v[l];
+                        out.block[l] = bi as u32;
+                        out.lane[l] = lane as u32;
+                    }
+                }
+            }
+            false
+        });
+        out
+    }
+}
+
+/// One ray's slab-test terms, for the 8 children of a node at a time.
+pub(crate) struct BoxRay {
+    rd: [f32x8; 3],
+    od: [f32x8; 3],
+    /// Row of the near plane per axis: the box minimum where the direction is positive.
+    near: [usize; 3],
+    far: [usize; 3],
+    tnear: f32x8,
+    pad: f32x8,
+    widen: f32x8,
+}
+
+impl BoxRay {
+    #[inline(always)]
+    pub fn new(ray: &Ray) -> Self {
+        let rdir = Vec3::new(safe_rcp(ray.dir.x), safe_rcp(ray.dir.y), safe_rcp(ray.dir.z));
+        let ordir = ray.origin * rdir;
+        let near = [(rdir.x < 0.0) as usize, 2 + (rdir.y < 0.0) as usize, 4 + (rdir.z < 0.0) as usize];
+        Self {
+            rd: [f32x8::splat(rdir.x), f32x8::splat(rdir.y), f32x8::splat(rdir.z)],
+            od: [f32x8::splat(ordir.x), f32x8::splat(ordir.y), f32x8::splat(ordir.z)],
+            near,
+            far: [near[0] ^ 1, near[1] ^ 1, near[2] ^ 1],
+            tnear: f32x8::splat(ray.tnear),
+            pad: f32x8::splat(WIDEN * ordir.abs().max_element()),
+            widen: f32x8::splat(1.0 + WIDEN),
+        }
+    }
+
+    /// The children of `node` the ray enters before `tfar`, and the entry distance of each.
+    #[inline(always)]
+    fn test<const CONS: bool>(&self, node: &Node, tfar: f32) -> (u32, [f32; WIDTH]) {
+        let b = &node.bounds;
+        let slab = |row: usize, a: usize| f32x8::new(b[row]).mul_sub(self.rd[a], self.od[a]);
+        let tn =
+            slab(self.near[0], 0).fast_max(slab(self.near[1], 1)).fast_max(slab(self.near[2], 2).fast_max(self.tnear));
+        let tf = slab(self.far[0], 0)
+            .fast_min(slab(self.far[1], 1))
+            .fast_min(slab(self.far[2], 2).fast_min(f32x8::splat(tfar)));
+        let mask = if CONS { tn.simd_le(tf.mul_add(self.widen, self.pad)) } else { tn.simd_le(tf) }.to_bitmask();
+        (mask, tn.to_array())
+    }
+}
+
+/// The ordered depth-first walk of one ray over `nodes`, from the entries on `stack`.
+/// `leaf(reference, tfar)` tests one leaf, may lower `tfar`, and returns true to end the walk (an
+/// any-hit query found its hit). Shared by triangle BVHs and the instance level above them.
+#[inline(always)]
+pub(crate) fn walk1<const ANY: bool, const CONS: bool>(
+    nodes: &[Node],
+    br: &BoxRay,
+    stack: &mut Stack,
+    tfar: &mut f32,
+    mut leaf: impl FnMut(u32, &mut f32) -> bool,
+) {
+    'pop: while let Some((mut cur, dist)) = stack.pop() {
+        // Skip subtrees entered beyond the closest hit so far.
+        if dist > *tfar {
+            continue;
+        }
+        loop {
+            if is_leaf(cur) {
+                if leaf(cur, tfar) {
+                    return;
+                }
+                continue 'pop;
+            }
+            let node = &nodes[cur as usize];
+            let (mask, tn) = br.test::<CONS>(node, *tfar);
+            if mask == 0 {
+                continue 'pop;
+            }
+            match order_children::<ANY>(stack, &node.child, mask, &tn) {
+                Some(next) => cur = next,
+                None => continue 'pop,
+            }
+        }
+    }
+}
+
+/// A packet's slab-test terms: per-lane reciprocals, and the frustum if the packet has one.
+pub(crate) struct PacketBoxes {
+    pub o: [Pf; 3],
+    pub d: [Pf; 3],
+    rdir: [Pf; 3],
+    od: [Pf; 3],
+    pad: Pf,
+    widen: Pf,
+    /// Per lane; `+inf` in lanes out of the query, so no node or triangle test passes them.
+    pub tnear: Pf,
+    /// The active lanes with valid rays.
+    pub live: u32,
+    frustum: Option<Frustum>,
+}
+
+impl PacketBoxes {
+    /// The terms and the lanes' initial `tfar` (`−inf` out of the query), or `None` if no active
+    /// lane holds a valid ray.
+    #[inline(always)]
+    pub fn new(p: &RayPacket) -> Option<(Self, Pf)> {
         let mut live = 0u32;
         for lane in 0..PACKET_WIDTH {
             if p.is_active(lane) && p.get(lane).is_valid() {
                 live |= 1 << lane;
             }
         }
-        if live == 0 || self.root == EMPTY {
-            return out;
+        if live == 0 {
+            return None;
         }
         let o = [Pf::new(p.ox), Pf::new(p.oy), Pf::new(p.oz)];
         let d = [Pf::new(p.dx), Pf::new(p.dy), Pf::new(p.dz)];
@@ -453,8 +582,6 @@ impl Bvh {
         let rdir = [rcp(d[0]), rcp(d[1]), rcp(d[2])];
         let od = [o[0] * rdir[0], o[1] * rdir[1], o[2] * rdir[2]];
         let pad = od[0].abs().fast_max(od[1].abs()).fast_max(od[2].abs()) * Pf::splat(WIDEN);
-        let widen = Pf::splat(1.0 + WIDEN);
-        // Lanes out of the query get an empty interval, so no node or triangle test passes them.
         let mut tn_a = p.tnear;
         let mut tf_a = p.tfar;
         for lane in 0..PACKET_WIDTH {
@@ -464,115 +591,92 @@ impl Bvh {
             }
         }
         let tnear = Pf::new(tn_a);
-        let mut tfar = Pf::new(tf_a);
-        let mut tfar_max = hmax(tfar);
-        let rk = RayK { o, d, tnear };
         let frustum = Frustum::new(&o, &rdir, tnear, live);
-        let inf = Pf::splat(f32::INFINITY);
+        Some((Self { o, d, rdir, od, pad, widen: Pf::splat(1.0 + WIDEN), tnear, live, frustum }, Pf::new(tf_a)))
+    }
+}
 
-        'pop: while let Some((mut cur, dist)) = stack.pop() {
-            if dist > tfar_max {
+/// The ordered depth-first walk of a packet over `nodes`: children tested with the frustum if
+/// the packet has one, per lane otherwise, and entered if any lane enters them. `leaf` as in
+/// [`walk1`], with the lanes' `tfar`.
+#[inline(always)]
+pub(crate) fn walk_packet<const ANY: bool, const CONS: bool>(
+    nodes: &[Node],
+    pb: &PacketBoxes,
+    stack: &mut Stack,
+    tfar: &mut Pf,
+    mut leaf: impl FnMut(u32, &mut Pf) -> bool,
+) {
+    let inf = Pf::splat(f32::INFINITY);
+    let mut tfar_max = hmax(*tfar);
+    'pop: while let Some((mut cur, dist)) = stack.pop() {
+        if dist > tfar_max {
+            continue;
+        }
+        loop {
+            if is_leaf(cur) {
+                if leaf(cur, tfar) {
+                    return;
+                }
+                tfar_max = hmax(*tfar);
+                continue 'pop;
+            }
+            let node = &nodes[cur as usize];
+            let b = &node.bounds;
+            if let Some(f) = &pb.frustum {
+                let (mask, d) = f.test::<CONS>(b, tfar_max);
+                if mask == 0 {
+                    continue 'pop;
+                }
+                match order_children::<ANY>(stack, &node.child, mask, &d) {
+                    Some(next) => cur = next,
+                    None => continue 'pop,
+                }
                 continue;
             }
-            loop {
-                if is_leaf(cur) {
-                    let (start, count) = leaf_blocks(cur);
-                    let active = tnear.simd_le(tfar);
-                    for bi in start..start + count {
-                        let blk = &self.blocks[bi];
-                        for lane in 0..BLOCK {
-                            if blk.prim[lane] == u32::MAX {
-                                break;
-                            }
-                            let (valid, t, u, v) = K::intersect_packet(blk, lane, &rk, tfar, active);
-                            let mut bits = valid.to_bitmask();
-                            if bits == 0 {
-                                continue;
-                            }
-                            if ANY {
-                                // Occluded lanes are finished: close their interval.
-                                out.mask |= bits;
-                                tfar = valid.select(Pf::splat(f32::NEG_INFINITY), tfar);
-                                if out.mask == live {
-                                    return out;
-                                }
-                                continue;
-                            }
-                            tfar = valid.select(t, tfar);
-                            let (t, u, v) = (t.to_array(), u.to_array(), v.to_array());
-                            out.mask |= bits;
-                            while bits != 0 {
-                                let l = bits.trailing_zeros() as usize;
-                                bits &= bits - 1;
-                                out.t[l] = t[l];
-                                out.u[l] = u[l];
-                                out.v[l] = v[l];
-                                out.block[l] = bi as u32;
-                                out.lane[l] = lane as u32;
-                            }
-                        }
-                    }
-                    tfar_max = hmax(tfar);
-                    continue 'pop;
+            let mut hit_child = [0u32; WIDTH];
+            let mut hit_dist = [0f32; WIDTH];
+            let mut n = 0;
+            for i in 0..WIDTH {
+                let c = node.child[i];
+                if c == EMPTY {
+                    break;
                 }
-                let node = &self.nodes[cur as usize];
-                let b = &node.bounds;
-                if let Some(f) = &frustum {
-                    let (mask, d) = f.test::<CONS>(b, tfar_max);
-                    if mask == 0 {
-                        continue 'pop;
-                    }
-                    match order_children::<ANY>(stack, &node.child, mask, &d) {
-                        Some(next) => cur = next,
-                        None => continue 'pop,
-                    }
-                    continue;
-                }
-                let mut hit_child = [0u32; WIDTH];
-                let mut hit_dist = [0f32; WIDTH];
-                let mut n = 0;
-                for i in 0..WIDTH {
-                    let c = node.child[i];
-                    if c == EMPTY {
-                        break;
-                    }
-                    let slab = |lo: f32, hi: f32, a: usize| {
-                        let t0 = Pf::splat(lo).mul_sub(rdir[a], od[a]);
-                        let t1 = Pf::splat(hi).mul_sub(rdir[a], od[a]);
-                        (t0.fast_min(t1), t0.fast_max(t1))
-                    };
-                    let (nx, fx) = slab(b[0][i], b[1][i], 0);
-                    let (ny, fy) = slab(b[2][i], b[3][i], 1);
-                    let (nz, fz) = slab(b[4][i], b[5][i], 2);
-                    let tn = nx.fast_max(ny).fast_max(nz.fast_max(tnear));
-                    let tf = fx.fast_min(fy).fast_min(fz.fast_min(tfar));
-                    let m = if CONS { tn.simd_le(tf.mul_add(widen, pad)) } else { tn.simd_le(tf) };
-                    if m.to_bitmask() != 0 {
-                        hit_child[n] = c;
-                        hit_dist[n] = hmin(m.select(tn, inf));
-                        n += 1;
-                    }
-                }
-                if n == 0 {
-                    continue 'pop;
-                }
-                if n == 1 {
-                    cur = hit_child[0];
-                    continue;
-                }
-                let base = stack.len;
-                for k in 0..n {
-                    stack.push(hit_child[k], hit_dist[k]);
-                }
-                if !ANY {
-                    stack.sort_from(base);
-                }
-                let Some((next, _)) = stack.pop() else {
-                    continue 'pop;
+                let slab = |lo: f32, hi: f32, a: usize| {
+                    let t0 = Pf::splat(lo).mul_sub(pb.rdir[a], pb.od[a]);
+                    let t1 = Pf::splat(hi).mul_sub(pb.rdir[a], pb.od[a]);
+                    (t0.fast_min(t1), t0.fast_max(t1))
                 };
-                cur = next;
+                let (nx, fx) = slab(b[0][i], b[1][i], 0);
+                let (ny, fy) = slab(b[2][i], b[3][i], 1);
+                let (nz, fz) = slab(b[4][i], b[5][i], 2);
+                let tn = nx.fast_max(ny).fast_max(nz.fast_max(pb.tnear));
+                let tf = fx.fast_min(fy).fast_min(fz.fast_min(*tfar));
+                let m = if CONS { tn.simd_le(tf.mul_add(pb.widen, pb.pad)) } else { tn.simd_le(tf) };
+                if m.to_bitmask() != 0 {
+                    hit_child[n] = c;
+                    hit_dist[n] = hmin(m.select(tn, inf));
+                    n += 1;
+                }
             }
+            if n == 0 {
+                continue 'pop;
+            }
+            if n == 1 {
+                cur = hit_child[0];
+                continue;
+            }
+            let base = stack.len;
+            for k in 0..n {
+                stack.push(hit_child[k], hit_dist[k]);
+            }
+            if !ANY {
+                stack.sort_from(base);
+            }
+            let Some((next, _)) = stack.pop() else {
+                continue 'pop;
+            };
+            cur = next;
         }
-        out
     }
 }

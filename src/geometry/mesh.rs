@@ -1,6 +1,6 @@
 //! Indexed triangle meshes, validated on construction.
 
-use glam::Vec3;
+use glam::{Affine3A, Vec3};
 
 use crate::error::{Error, Result};
 
@@ -74,6 +74,13 @@ impl TriangleMesh {
         for p in &mut self.positions {
             *p = f(*p);
         }
+    }
+
+    /// A copy with every vertex moved by `m` (an instance flattened into world space).
+    pub fn transformed(&self, m: &Affine3A) -> TriangleMesh {
+        let mut t = self.clone();
+        t.map_positions(|p| m.transform_point3(p));
+        t
     }
 
     /// Axis-aligned bounds of the finite vertices, or `None` if there are none.

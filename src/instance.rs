@@ -1,0 +1,437 @@
+//! Two-level scenes: instancing by ray transformation (the seeds' instancing slides; Embree's
+//! `RTC_GEOMETRY_TYPE_INSTANCE`).
+//!
+//! Each object (a [`Scene`] of meshes) is built once in its own space. An [`Instance`] places an
+//! object in the world with an affine transform; a top-level BVH over the instances' world boxes
+//! finds the instances a ray may hit. At an instance the ray is moved into the object's space with
+//! the inverse transform, origin and direction, and the direction is *not* renormalized: `t` then
+//! measures the same point in both spaces, so the object BVH can be walked with the ray's current
+//! `tfar` and its hit compared with hits in other instances as is. The geometric normal is brought
+//! back to world space with the inverse transpose of the linear part (times its determinant, so
+//! it stays the cross product of the placed triangle's edges).
+//!
+//! Memory grows with the number of distinct objects, not with the number of placed triangles: a
+//! world of 10,000 instances of a 433k-triangle object stores the object once plus 10,000 small
+//! records and a top-level BVH over them.
+
+use std::time::Instant;
+
+use glam::{Affine3A, Mat3A, Vec3, Vec3A};
+
+use crate::bvh::build::{self, Aabb, BuildNode, PrimRef};
+use crate::bvh::node::{EMPTY, MAX_BLOCK_INDEX, Node, leaf_blocks, leaf_ref};
+use crate::bvh::traverse::{BoxRay, LeafHit, PacketBoxes, walk_packet, walk1, with_top_stack};
+use crate::bvh::{BoxTest, BuildConfig};
+use crate::error::{Error, Result};
+use crate::ray::{Hit, PACKET_WIDTH, Ray, RayPacket};
+use crate::scene::{Query, Scene};
+use crate::simd::Pf;
+
+/// One placement of an object: `object` indexes the objects of the [`InstancedScene`], and
+/// `transform` maps object space to world space.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Instance {
+    pub object: usize,
+    pub transform: Affine3A,
+}
+
+impl Instance {
+    pub fn new(object: usize, transform: Affine3A) -> Self {
+        Self { object, transform }
+    }
+}
+
+/// What the top-level leaves hold, in leaf order: everything traversal needs at an instance.
+#[derive(Clone, Copy, Debug)]
+struct Placed {
+    /// World to object space.
+    to_object: Affine3A,
+    /// Object-space geometric normals to world space: the cofactor matrix of the linear part,
+    /// `det(M)·M⁻ᵀ`, which maps `e1 × e2` to the cross product of the moved edges, so a mirroring
+    /// transform flips the normal with the winding, as flattening would.
+    normal_to_world: Mat3A,
+    object: u32,
+    /// Index in the list the scene was built from (the hit's `inst_id`).
+    id: u32,
+}
+
+/// Figures of a two-level build.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct InstancedStats {
+    /// Wall time of the top-level build (objects are built before, see their own stats).
+    pub top_build_ms: f64,
+    /// Wall time of the object builds.
+    pub objects_build_ms: f64,
+    pub instances: usize,
+    /// Triangles over all instances, counted once per instance (what the world shows).
+    pub instanced_triangles: u64,
+    /// Triangles stored: each object's once.
+    pub unique_triangles: usize,
+    /// Bytes of the objects' BVHs and blocks, the top-level nodes and the instance records.
+    pub bytes: usize,
+    /// Bytes a flat BVH over every placed triangle would need, estimated from each object's own
+    /// bytes per triangle times the triangles it places.
+    pub flattened_bytes: u64,
+}
+
+/// Objects placed by instances, with a BVH over the instances.
+#[derive(Clone, Debug)]
+pub struct InstancedScene {
+    objects: Vec<Scene>,
+    instances: Vec<Instance>,
+    nodes: Vec<Node>,
+    root: u32,
+    placed: Vec<Placed>,
+    bounds: Option<(Vec3, Vec3)>,
+    box_test: BoxTest,
+    stats: InstancedStats,
+}
+
+/// Instances per top-level leaf: one, as Embree's instance BVH has. An instance costs a whole
+/// object traversal, so the builder should never merge two into a leaf to save a node.
+const INSTANCES_PER_LEAF: usize = 1;
+
+impl InstancedScene {
+    /// Builds one BVH per object (each a list of meshes), then the top level over `instances`,
+    /// all with `config` on the current rayon pool. Geometry ids in hits are indices into the
+    /// object's meshes; instance ids are indices into `instances`.
+    ///
+    /// Errors: an instance naming no object ([`Error::UnknownObject`]), or a transform that is not
+    /// finite and invertible ([`Error::BadTransform`]).
+    pub fn build(
+        objects: Vec<Vec<crate::geometry::TriangleMesh>>,
+        instances: Vec<Instance>,
+        config: &BuildConfig,
+    ) -> Result<Self> {
+        let start = Instant::now();
+        let objects = objects.into_iter().map(|meshes| Scene::build(meshes, config)).collect::<Result<Vec<Scene>>>()?;
+        let objects_build_ms = start.elapsed().as_secs_f64() * 1e3;
+        Self::from_objects(objects, instances, config.box_test, objects_build_ms)
+    }
+
+    /// Places already built objects; see [`build`](Self::build).
+    pub fn from_scenes(objects: Vec<Scene>, instances: Vec<Instance>, box_test: BoxTest) -> Result<Self> {
+        Self::from_objects(objects, instances, box_test, 0.0)
+    }
+
+    fn from_objects(
+        objects: Vec<Scene>,
+        instances: Vec<Instance>,
+        box_test: BoxTest,
+        objects_build_ms: f64,
+    ) -> Result<Self> {
+        let start = Instant::now();
+        if instances.len() > MAX_BLOCK_INDEX {
+            return Err(Error::TooManyGeometries(instances.len()));
+        }
+        let mut prims = Vec::with_capacity(instances.len());
+        for (i, inst) in instances.iter().enumerate() {
+            let Some(obj) = objects.get(inst.object) else {
+                return Err(Error::UnknownObject { instance: i, object: inst.object, objects: objects.len() });
+            };
+            let m = inst.transform;
+            let det = m.matrix3.determinant();
+            if !m.is_finite() || det == 0.0 || !det.is_finite() || !m.inverse().is_finite() {
+                return Err(Error::BadTransform { instance: i });
+            }
+            if let Some((lo, hi)) = obj.bounds() {
+                prims.push(PrimRef::new(world_box(&m, lo, hi), i as u32));
+            }
+        }
+        let cfg = BuildConfig {
+            min_leaf: INSTANCES_PER_LEAF,
+            max_leaf: INSTANCES_PER_LEAF,
+            parallel_threshold: 4096,
+            ..BuildConfig::default()
+        };
+        let tree = build::build(&mut prims, &cfg);
+        let mut nodes = Vec::new();
+        let (root, bounds) = match &tree {
+            None => (EMPTY, None),
+            Some((b, node)) => (layout(node, &mut nodes), Some((Vec3::from(b.lo), Vec3::from(b.hi)))),
+        };
+        // Leaf entries in the builder's order, so neighbouring leaves sit side by side in memory.
+        let placed: Vec<Placed> = prims
+            .iter()
+            .map(|p| {
+                let id = p.id();
+                let inst = &instances[id as usize];
+                let to_object = inst.transform.inverse();
+                Placed {
+                    to_object,
+                    normal_to_world: to_object.matrix3.transpose() * inst.transform.matrix3.determinant(),
+                    object: inst.object as u32,
+                    id,
+                }
+            })
+            .collect();
+        let object_bytes: usize = objects.iter().map(|o| o.stats().bytes).sum();
+        let bytes = object_bytes
+            + nodes.len() * size_of::<Node>()
+            + placed.len() * size_of::<Placed>()
+            + instances.len() * size_of::<Instance>();
+        let mut instanced_triangles = 0u64;
+        let mut flattened_bytes = 0u64;
+        for inst in &instances {
+            let s = objects[inst.object].stats();
+            instanced_triangles += objects[inst.object].triangle_count() as u64;
+            flattened_bytes += s.bytes as u64;
+        }
+        let stats = InstancedStats {
+            top_build_ms: start.elapsed().as_secs_f64() * 1e3,
+            objects_build_ms,
+            instances: instances.len(),
+            instanced_triangles,
+            unique_triangles: objects.iter().map(|o| o.triangle_count()).sum(),
+            bytes,
+            flattened_bytes,
+        };
+        Ok(Self { objects, instances, nodes, root, placed, bounds, box_test, stats })
+    }
+
+    pub fn objects(&self) -> &[Scene] {
+        &self.objects
+    }
+
+    pub fn instances(&self) -> &[Instance] {
+        &self.instances
+    }
+
+    pub fn stats(&self) -> &InstancedStats {
+        &self.stats
+    }
+
+    /// World bounds of all instances, or `None` if nothing can be hit.
+    pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
+        self.bounds
+    }
+
+    /// The same world as one flat [`Scene`]: every instance's meshes transformed into world space
+    /// (geometry ids numbered instance by instance, object mesh by object mesh). For comparison
+    /// and for small worlds; memory grows with the placed triangles.
+    pub fn flatten(&self, config: &BuildConfig) -> Result<Scene> {
+        let mut meshes = Vec::new();
+        for inst in &self.instances {
+            for m in self.objects[inst.object].meshes() {
+                meshes.push(m.transformed(&inst.transform));
+            }
+        }
+        Scene::build(meshes, config)
+    }
+
+    /// The closest hit among every instance by testing every object triangle of every instance
+    /// (O(instances × triangles)): the reference the two levels are tested against.
+    pub fn intersect_brute_force(&self, ray: &Ray) -> Option<Hit> {
+        if !ray.is_valid() {
+            return None;
+        }
+        let mut best: Option<Hit> = None;
+        for (i, inst) in self.instances.iter().enumerate() {
+            let to_object = inst.transform.inverse();
+            let tfar = best.map_or(ray.tfar, |h| h.t);
+            let r = object_ray(&to_object, ray, tfar);
+            if let Some(h) = self.objects[inst.object].intersect_brute_force(&r) {
+                best = Some(Hit {
+                    ng: to_object.matrix3.transpose() * h.ng * inst.transform.matrix3.determinant(),
+                    inst_id: i as u32,
+                    ..h
+                });
+            }
+        }
+        best
+    }
+
+    fn trace1<const ANY: bool>(&self, ray: &Ray) -> Option<(u32, LeafHit)> {
+        if !ray.is_valid() || self.root == EMPTY {
+            return None;
+        }
+        match self.box_test {
+            BoxTest::Conservative => self.trace1_with::<ANY, true>(ray),
+            BoxTest::Fast => self.trace1_with::<ANY, false>(ray),
+        }
+    }
+
+    fn trace1_with<const ANY: bool, const CONS: bool>(&self, ray: &Ray) -> Option<(u32, LeafHit)> {
+        let br = BoxRay::new(ray);
+        let mut tfar = ray.tfar;
+        let mut best = None;
+        with_top_stack(self.root, |stack| {
+            walk1::<ANY, CONS>(&self.nodes, &br, stack, &mut tfar, |leaf, tfar| {
+                let (start, count) = leaf_blocks(leaf);
+                for k in start..start + count {
+                    let p = &self.placed[k];
+                    let r = object_ray(&p.to_object, ray, *tfar);
+                    if let Some(h) = self.objects[p.object as usize].bvh().trace1::<ANY>(&r) {
+                        *tfar = h.t;
+                        best = Some((k as u32, h));
+                        if ANY {
+                            return true;
+                        }
+                    }
+                }
+                false
+            })
+        });
+        best
+    }
+
+    fn trace_packet<const ANY: bool>(&self, p: &RayPacket) -> PacketHits {
+        match self.box_test {
+            BoxTest::Conservative => self.trace_packet_with::<ANY, true>(p),
+            BoxTest::Fast => self.trace_packet_with::<ANY, false>(p),
+        }
+    }
+
+    fn trace_packet_with<const ANY: bool, const CONS: bool>(&self, p: &RayPacket) -> PacketHits {
+        let mut out = PacketHits { mask: 0, placed: [0; PACKET_WIDTH], hit: [None; PACKET_WIDTH] };
+        if self.root == EMPTY {
+            return out;
+        }
+        let Some((pb, mut tfar)) = PacketBoxes::new(p) else {
+            return out;
+        };
+        with_top_stack(self.root, |stack| {
+            walk_packet::<ANY, CONS>(&self.nodes, &pb, stack, &mut tfar, |leaf, tfar| {
+                let (start, count) = leaf_blocks(leaf);
+                for k in start..start + count {
+                    let pl = &self.placed[k];
+                    let active = pb.tnear.simd_le(*tfar).to_bitmask() & pb.live;
+                    if active == 0 {
+                        break;
+                    }
+                    let q = object_packet(&pl.to_object, &pb, *tfar, p, active);
+                    let r = self.objects[pl.object as usize].bvh().trace_packet::<ANY>(&q);
+                    if r.mask == 0 {
+                        continue;
+                    }
+                    let mut t = tfar.to_array();
+                    let mut bits = r.mask;
+                    while bits != 0 {
+                        let l = bits.trailing_zeros() as usize;
+                        bits &= bits - 1;
+                        if ANY {
+                            t[l] = f32::NEG_INFINITY;
+                        } else {
+                            t[l] = r.t[l];
+                            out.placed[l] = k as u32;
+                            out.hit[l] =
+                                Some(LeafHit { block: r.block[l], lane: r.lane[l], t: r.t[l], u: r.u[l], v: r.v[l] });
+                        }
+                    }
+                    out.mask |= r.mask;
+                    *tfar = Pf::new(t);
+                    if ANY && out.mask == pb.live {
+                        return true;
+                    }
+                }
+                false
+            })
+        });
+        out
+    }
+
+    /// The public hit record of a leaf hit in placed instance `k`.
+    #[inline]
+    fn hit_record(&self, k: u32, h: &LeafHit) -> Hit {
+        let p = &self.placed[k as usize];
+        let hit = self.objects[p.object as usize].bvh().hit_record(h);
+        Hit { ng: Vec3::from(p.normal_to_world * Vec3A::from(hit.ng)), inst_id: p.id, ..hit }
+    }
+}
+
+struct PacketHits {
+    mask: u32,
+    placed: [u32; PACKET_WIDTH],
+    hit: [Option<LeafHit>; PACKET_WIDTH],
+}
+
+/// `ray` in object space over `(tnear, tfar]`; the direction keeps the transform's scale.
+#[inline(always)]
+fn object_ray(to_object: &Affine3A, ray: &Ray, tfar: f32) -> Ray {
+    Ray {
+        origin: to_object.transform_point3(ray.origin),
+        dir: to_object.transform_vector3(ray.dir),
+        tnear: ray.tnear,
+        tfar,
+    }
+}
+
+/// The lanes `active` of a packet in object space, with their current `tfar`.
+#[inline(always)]
+fn object_packet(to_object: &Affine3A, pb: &PacketBoxes, tfar: Pf, p: &RayPacket, active: u32) -> RayPacket {
+    let m = to_object.matrix3;
+    let tr = to_object.translation;
+    // The operations and their order of glam's `transform_point3` / `transform_vector3` (no fused
+    // multiply-add), so a lane is moved exactly as the single-ray query moves it.
+    let row = |a: usize, v: &[Pf; 3], with_t: bool| {
+        let x = v[0] * Pf::splat(m.x_axis[a]) + v[1] * Pf::splat(m.y_axis[a]) + v[2] * Pf::splat(m.z_axis[a]);
+        if with_t { (x + Pf::splat(tr[a])).to_array() } else { x.to_array() }
+    };
+    RayPacket {
+        ox: row(0, &pb.o, true),
+        oy: row(1, &pb.o, true),
+        oz: row(2, &pb.o, true),
+        dx: row(0, &pb.d, false),
+        dy: row(1, &pb.d, false),
+        dz: row(2, &pb.d, false),
+        tnear: p.tnear,
+        tfar: tfar.to_array(),
+        active,
+    }
+}
+
+/// The world box of an object box `lo..hi` under `m`: the bounds of its eight moved corners.
+fn world_box(m: &Affine3A, lo: Vec3, hi: Vec3) -> Aabb {
+    let mut b = Aabb::EMPTY;
+    for c in 0..8 {
+        let p = Vec3::new(
+            if c & 1 == 0 { lo.x } else { hi.x },
+            if c & 2 == 0 { lo.y } else { hi.y },
+            if c & 4 == 0 { lo.z } else { hi.z },
+        );
+        b.grow_point(Vec3A::from(m.transform_point3(p)));
+    }
+    b
+}
+
+/// Appends `node` depth-first; leaves reference `count` entries of the reordered instance list.
+fn layout(node: &BuildNode, nodes: &mut Vec<Node>) -> u32 {
+    match node {
+        BuildNode::Leaf { start, count } => leaf_ref(*start, *count),
+        BuildNode::Inner { children } => {
+            let index = nodes.len();
+            nodes.push(Node::default());
+            for (i, (b, child)) in children.iter().enumerate() {
+                let r = layout(child, nodes);
+                nodes[index].set(i, r, b.lo.into(), b.hi.into());
+            }
+            index as u32
+        }
+    }
+}
+
+impl Query for InstancedScene {
+    fn intersect(&self, ray: &Ray) -> Option<Hit> {
+        self.trace1::<false>(ray).map(|(k, h)| self.hit_record(k, &h))
+    }
+
+    fn occluded(&self, ray: &Ray) -> bool {
+        self.trace1::<true>(ray).is_some()
+    }
+
+    fn intersect_packet_each(&self, rays: &RayPacket, mut f: impl FnMut(usize, &Hit)) {
+        let r = self.trace_packet::<false>(rays);
+        let mut bits = r.mask;
+        while bits != 0 {
+            let l = bits.trailing_zeros() as usize;
+            bits &= bits - 1;
+            if let Some(h) = &r.hit[l] {
+                f(l, &self.hit_record(r.placed[l], h));
+            }
+        }
+    }
+
+    fn occluded_packet(&self, rays: &RayPacket) -> u32 {
+        self.trace_packet::<true>(rays).mask
+    }
+}
