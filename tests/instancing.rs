@@ -30,7 +30,7 @@ fn world(n: usize, extent: f32, offset: Vec3, seed: u64) -> (Vec<Vec<TriangleMes
     let instances = (0..n)
         .map(|i| {
             let axis = uniform_direction(&mut rng);
-            let angle = rng.next_f32() * 6.28;
+            let angle = rng.next_f32() * std::f32::consts::TAU;
             let mut scale = rng_vec(&mut rng, 0.3, 1.5);
             if i % 7 == 3 {
                 scale.x = -scale.x;
