@@ -25,6 +25,8 @@ pub enum Error {
     IndexOutOfRange { triangle: usize, index: u32, vertex_count: usize },
     #[error("mesh has {0} triangles; at most 2^32 - 1 are supported")]
     TooManyTriangles(usize),
+    #[error("scene file {path}: {message}")]
+    SceneFile { path: PathBuf, message: String },
     #[error("instance {instance} places object {object}, but there are only {objects} objects")]
     UnknownObject { instance: usize, object: usize, objects: usize },
     #[error("instance {instance} has a transform that is not finite and invertible")]

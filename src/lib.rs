@@ -37,6 +37,7 @@ pub mod procedural;
 pub mod ray;
 pub mod raygen;
 pub mod scene;
+pub mod scene_file;
 pub mod simd;
 
 pub use bvh::{BoxTest, BuildConfig, BuildStats};
@@ -46,6 +47,7 @@ pub use geometry::{TriangleMesh, TriangleTest, exact_hit, intersect_triangle, lo
 pub use instance::{Instance, InstancedScene, InstancedStats};
 pub use ray::{Hit, HitPacket, HitStream, INVALID_ID, PACKET_WIDTH, Ray, RayPacket, RayStream, offset_ray_origin};
 pub use scene::{Coherence, Query, STREAM_CHUNK, Scene};
+pub use scene_file::{Light, SceneFile};
 
 /// The README's code examples run as doctests.
 #[cfg(doctest)]

@@ -96,21 +96,105 @@ fn decide(ray: &Ray, tri: [Vec3; 3], h: Option<(f64, [f64; 3])>) -> (Option<bool
     (Some(m > 0.0 && t > tn && t <= tf), "clear")
 }
 
-struct Lookup<'a> {
-    meshes: &'a [TriangleMesh],
+/// The triangles answers can name, in world space, for float64 decisions.
+pub trait World: Sync {
+    /// The corners of triangle (instance, geometry, primitive), if it exists.
+    fn tri(&self, key: (u32, u32, u32)) -> Option<[Vec3; 3]>;
+    /// Calls `f` with every hittable triangle that `ray` might meet (all of them, or those of
+    /// the instances whose world box the ray crosses); `f` returns true to stop.
+    fn for_each_near(&self, ray: &Ray, f: &mut dyn FnMut([Vec3; 3]) -> bool);
 }
 
-impl Lookup<'_> {
-    fn tri(&self, geom: u32, prim: u32) -> Option<[Vec3; 3]> {
-        let m = self.meshes.get(geom as usize)?;
+/// The meshes of a flat scene.
+pub struct Flat<'a>(pub &'a [TriangleMesh]);
+
+impl World for Flat<'_> {
+    fn tri(&self, (_, geom, prim): (u32, u32, u32)) -> Option<[Vec3; 3]> {
+        let m = self.0.get(geom as usize)?;
         ((prim as usize) < m.triangle_count()).then(|| m.triangle(prim as usize))
+    }
+
+    fn for_each_near(&self, _ray: &Ray, f: &mut dyn FnMut([Vec3; 3]) -> bool) {
+        for m in self.0 {
+            for i in (0..m.triangle_count()).filter(|&i| m.is_hittable(i)) {
+                if f(m.triangle(i)) {
+                    return;
+                }
+            }
+        }
+    }
+}
+
+/// Objects placed by instances: triangles moved into world space in float64, then rounded.
+pub struct InstancedWorld<'a> {
+    pub objects: &'a [Vec<TriangleMesh>],
+    pub instances: &'a [strahl::Instance],
+    boxes: Vec<Option<(Vec3, Vec3)>>,
+}
+
+impl<'a> InstancedWorld<'a> {
+    pub fn new(objects: &'a [Vec<TriangleMesh>], instances: &'a [strahl::Instance]) -> Self {
+        let boxes = instances
+            .iter()
+            .map(|inst| {
+                let mut b: Option<(Vec3, Vec3)> = None;
+                for m in &objects[inst.object] {
+                    for p in m.positions().iter().filter(|p| p.is_finite()) {
+                        let w = inst.transform.transform_point3(*p);
+                        b = Some(b.map_or((w, w), |(lo, hi)| (lo.min(w), hi.max(w))));
+                    }
+                }
+                b
+            })
+            .collect();
+        Self { objects, instances, boxes }
+    }
+
+    fn world(&self, inst: usize, tri: [Vec3; 3]) -> [Vec3; 3] {
+        let t = self.instances[inst].transform;
+        let m = glam::DAffine3::from_mat3_translation(t.matrix3.as_dmat3(), t.translation.as_dvec3());
+        tri.map(|p| m.transform_point3(p.as_dvec3()).as_vec3())
+    }
+}
+
+impl World for InstancedWorld<'_> {
+    fn tri(&self, (inst, geom, prim): (u32, u32, u32)) -> Option<[Vec3; 3]> {
+        let i = self.instances.get(inst as usize)?;
+        let m = self.objects[i.object].get(geom as usize)?;
+        ((prim as usize) < m.triangle_count()).then(|| self.world(inst as usize, m.triangle(prim as usize)))
+    }
+
+    fn for_each_near(&self, ray: &Ray, f: &mut dyn FnMut([Vec3; 3]) -> bool) {
+        for (k, inst) in self.instances.iter().enumerate() {
+            let Some((lo, hi)) = self.boxes[k] else { continue };
+            // A slab test in float64 on the box widened by a thousandth of its size.
+            let pad = (hi - lo).as_dvec3() * 1e-3 + glam::DVec3::splat(1e-9);
+            let (lo, hi) = (lo.as_dvec3() - pad, hi.as_dvec3() + pad);
+            let (o, d) = (ray.origin.as_dvec3(), ray.dir.as_dvec3());
+            let (mut tn, mut tf) = (ray.tnear as f64, ray.tfar as f64);
+            for a in 0..3 {
+                let (t0, t1) = ((lo[a] - o[a]) / d[a], (hi[a] - o[a]) / d[a]);
+                let (t0, t1) = if t0.is_nan() || t1.is_nan() { (f64::NEG_INFINITY, f64::INFINITY) } else { (t0, t1) };
+                tn = tn.max(t0.min(t1));
+                tf = tf.min(t0.max(t1));
+            }
+            if tn > tf {
+                continue;
+            }
+            for m in &self.objects[inst.object] {
+                for i in (0..m.triangle_count()).filter(|&i| m.is_hittable(i)) {
+                    if f(self.world(k, m.triangle(i))) {
+                        return;
+                    }
+                }
+            }
+        }
     }
 }
 
 /// Compares strahl's answers `s` with Embree's `e` on `rays`.
-pub fn compare(meshes: &[TriangleMesh], rays: &RayStream, occlusion: bool, s: &Answers, e: &Answers) -> Accuracy {
+pub fn compare(world: &dyn World, rays: &RayStream, occlusion: bool, s: &Answers, e: &Answers) -> Accuracy {
     let n = rays.len();
-    let look = Lookup { meshes };
     let mut acc = Accuracy::default();
     let mut rel = Vec::new();
     let mut both = 0usize;
@@ -130,7 +214,7 @@ pub fn compare(meshes: &[TriangleMesh], rays: &RayStream, occlusion: bool, s: &A
                     ("undecided", f64::NAN, f64::NAN)
                 } else {
                     brute_left -= 1;
-                    let (any_clear, any_tie, t64, mb) = brute_force_occlusion(meshes, &ray);
+                    let (any_clear, any_tie, t64, mb) = brute_force_occlusion(world, &ray);
                     if any_clear {
                         (if sh { "embree_error" } else { "strahl_error" }, mb, t64)
                     } else if let Some(kind) = any_tie {
@@ -140,8 +224,8 @@ pub fn compare(meshes: &[TriangleMesh], rays: &RayStream, occlusion: bool, s: &A
                     }
                 }
             } else {
-                let (g, p) = if sh { (sa.1, sa.2) } else { (ea.1, ea.2) };
-                match look.tri(g, p).map(|t| (t, exact(&ray, t))) {
+                let key = if sh { s.key(i) } else { e.key(i) };
+                match world.tri(key).map(|t| (t, exact(&ray, t))) {
                     Some((tri, h)) => {
                         let (clear, kind) = decide(&ray, tri, h);
                         let (t64, mb) = h.map(|(t, b)| (t, min3(b))).unwrap_or((f64::NAN, f64::NAN));
@@ -166,14 +250,14 @@ pub fn compare(meshes: &[TriangleMesh], rays: &RayStream, occlusion: bool, s: &A
             continue;
         }
         both += 1;
-        if (sa.1, sa.2) == (ea.1, ea.2) {
+        if s.key(i) == e.key(i) {
             same_prim += 1;
             let r = ((sa.0 as f64 - ea.0 as f64) / (ea.0 as f64).abs().max(1e-30)).abs();
             rel.push(r);
             continue;
         }
         acc.prim_disagreements += 1;
-        let (ts3, te3) = (look.tri(sa.1, sa.2), look.tri(ea.1, ea.2));
+        let (ts3, te3) = (world.tri(s.key(i)), world.tri(e.key(i)));
         let hs = ts3.and_then(|t| exact(&ray, t));
         let he = te3.and_then(|t| exact(&ray, t));
         let (verdict, minb, t64) = match (hs, he, ts3, te3) {
@@ -241,31 +325,30 @@ fn tally(d: &mut Disagreements, verdict: &str) {
 
 /// Float64 occlusion of `ray` over every triangle: (some triangle clearly occludes, the kind of
 /// tie if some triangle is within tolerance, nearest t, its smallest barycentric).
-fn brute_force_occlusion(meshes: &[TriangleMesh], ray: &Ray) -> (bool, Option<&'static str>, f64, f64) {
+fn brute_force_occlusion(world: &dyn World, ray: &Ray) -> (bool, Option<&'static str>, f64, f64) {
     let mut tie = None;
     let mut best = (f64::INFINITY, f64::NAN);
-    for m in meshes {
-        for i in 0..m.triangle_count() {
-            if !m.is_hittable(i) {
-                continue;
+    let mut clear = None;
+    world.for_each_near(ray, &mut |tri| {
+        let h = exact(ray, tri);
+        match decide(ray, tri, h) {
+            (Some(true), _) => {
+                clear = h;
+                return true;
             }
-            let tri = m.triangle(i);
-            let h = exact(ray, tri);
-            match decide(ray, tri, h) {
-                (Some(true), _) => {
-                    let (t, b) = h.expect("decided hits exist");
-                    return (true, None, t, min3(b));
+            (None, kind) => {
+                let (t, b) = h.expect("ties exist");
+                if t > ray.tnear as f64 - DEPTH_TOL * t.abs() && t < best.0 {
+                    best = (t, min3(b));
+                    tie = Some(if kind == "depth" { "depth_tie" } else { "edge_or_vertex_tie" });
                 }
-                (None, kind) => {
-                    let (t, b) = h.expect("ties exist");
-                    if t > ray.tnear as f64 - DEPTH_TOL * t.abs() && t < best.0 {
-                        best = (t, min3(b));
-                        tie = Some(if kind == "depth" { "depth_tie" } else { "edge_or_vertex_tie" });
-                    }
-                }
-                _ => {}
             }
+            _ => {}
         }
+        false
+    });
+    if let Some((t, b)) = clear {
+        return (true, None, t, min3(b));
     }
     (false, tie, best.0, best.1)
 }

@@ -21,6 +21,7 @@ const RTC_BUFFER_TYPE_INDEX: c_uint = 0;
 const RTC_BUFFER_TYPE_VERTEX: c_uint = 1;
 const RTC_FORMAT_UINT3: c_uint = 0x5003;
 const RTC_FORMAT_FLOAT3: c_uint = 0x9003;
+const RTC_FORMAT_FLOAT3X4_COLUMN_MAJOR: c_uint = 0x9234;
 const RTC_SCENE_FLAG_ROBUST: c_uint = 1 << 2;
 const RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT: c_uint = 0;
 const RTC_INTERSECT_CONTEXT_FLAG_COHERENT: c_uint = 1;
@@ -133,6 +134,8 @@ unsafe extern "C" {
     fn rtcReleaseGeometry(geometry: RTCGeometry);
     fn rtcCommitGeometry(geometry: RTCGeometry);
     fn rtcAttachGeometryByID(scene: RTCScene, geometry: RTCGeometry, id: c_uint);
+    fn rtcSetGeometryInstancedScene(geometry: RTCGeometry, scene: RTCScene);
+    fn rtcSetGeometryTransform(geometry: RTCGeometry, time_step: c_uint, format: c_uint, xfm: *const c_void);
     fn rtcSetNewGeometryBuffer(
         geometry: RTCGeometry,
         kind: c_uint,
@@ -209,11 +212,13 @@ impl Drop for Device {
     }
 }
 
-/// A committed Embree scene of triangle meshes, geometry ids equal to mesh indices.
+/// A committed Embree scene of triangle meshes, geometry ids equal to mesh indices; or of
+/// instances (geometry ids equal to instance indices) of the object scenes it keeps alive.
 pub struct Scene {
     raw: RTCScene,
-    /// Wall time of the commit (the BVH build).
+    /// Wall time of the commit (the BVH build); for instances, of all commits.
     pub build_ms: f64,
+    objects: Vec<Scene>,
 }
 
 // SAFETY: a committed scene is immutable; Embree documents rtcIntersect*/rtcOccluded* on a committed
@@ -234,7 +239,7 @@ impl Scene {
                 device.check("rtcNewScene")?;
                 anyhow::bail!("rtcNewScene failed");
             }
-            let mut scene = Self { raw, build_ms: 0.0 };
+            let mut scene = Self { raw, build_ms: 0.0, objects: Vec::new() };
             rtcSetSceneBuildQuality(raw, quality as c_uint);
             if robust {
                 rtcSetSceneFlags(raw, RTC_SCENE_FLAG_ROBUST);
@@ -273,6 +278,53 @@ impl Scene {
             rtcCommitScene(raw);
             scene.build_ms = start.elapsed().as_secs_f64() * 1e3;
             device.check("rtcCommitScene")?;
+            Ok(scene)
+        }
+    }
+
+    /// Builds each object (a list of meshes) as its own scene, then a scene of instances of them:
+    /// `(object, column-major 3×4 object-to-world matrix)`, as `RTC_GEOMETRY_TYPE_INSTANCE` with
+    /// `RTC_FORMAT_FLOAT3X4_COLUMN_MAJOR`. Hits report the instance index in `instID[0]`.
+    pub fn build_instanced(
+        device: &Device,
+        objects: &[Vec<TriangleMesh>],
+        instances: &[(usize, [f32; 12])],
+        quality: Quality,
+    ) -> anyhow::Result<Self> {
+        let objects =
+            objects.iter().map(|m| Self::build(device, m, quality, false)).collect::<anyhow::Result<Vec<_>>>()?;
+        if let Some((i, (o, _))) = instances.iter().enumerate().find(|(_, (o, _))| *o >= objects.len()) {
+            anyhow::bail!("instance {i} places object {o} of {}", objects.len());
+        }
+        // SAFETY: `device.raw` and every object scene are live and committed; each geometry is
+        // checked for null; the transform pointer refers to 12 floats that outlive the call (Embree
+        // copies them); the object scenes are kept in `objects` for as long as the top scene lives.
+        unsafe {
+            let raw = rtcNewScene(device.raw);
+            if raw.is_null() {
+                device.check("rtcNewScene")?;
+                anyhow::bail!("rtcNewScene failed");
+            }
+            let mut scene = Self { raw, build_ms: 0.0, objects: Vec::new() };
+            rtcSetSceneBuildQuality(raw, quality as c_uint);
+            for (id, (o, xfm)) in instances.iter().enumerate() {
+                let g = rtcNewGeometry(device.raw, RTC_GEOMETRY_TYPE_INSTANCE);
+                if g.is_null() {
+                    device.check("rtcNewGeometry")?;
+                    anyhow::bail!("rtcNewGeometry(INSTANCE) failed");
+                }
+                rtcSetGeometryInstancedScene(g, objects[*o].raw);
+                rtcSetGeometryTransform(g, 0, RTC_FORMAT_FLOAT3X4_COLUMN_MAJOR, xfm.as_ptr() as *const c_void);
+                rtcCommitGeometry(g);
+                rtcAttachGeometryByID(raw, g, id as c_uint);
+                rtcReleaseGeometry(g);
+            }
+            device.check("instance geometries")?;
+            let start = Instant::now();
+            rtcCommitScene(raw);
+            scene.build_ms = start.elapsed().as_secs_f64() * 1e3 + objects.iter().map(|s| s.build_ms).sum::<f64>();
+            device.check("rtcCommitScene")?;
+            scene.objects = objects;
             Ok(scene)
         }
     }

@@ -8,8 +8,8 @@ use glam::Vec3;
 use rayon::prelude::*;
 use serde::Serialize;
 use strahl::{
-    BuildConfig, Camera, Coherence, HitPacket, HitStream, INVALID_ID, PACKET_WIDTH, Query, RayStream, Scene,
-    TriangleMesh, raygen,
+    BuildConfig, Camera, Coherence, HitStream, InstancedScene, INVALID_ID, PACKET_WIDTH, Query, RayStream, Scene,
+    raygen,
 };
 
 use crate::accuracy::{self, Accuracy};
@@ -71,17 +71,38 @@ impl Api {
 }
 
 /// Per-ray answers of one engine: `t` (+inf for a miss; 0 for an occluded shadow ray) and ids
-/// (`INVALID_ID` for a miss; geometry 0 for an occluded shadow ray, whose primitive is unknown).
+/// (`INVALID_ID` for a miss; geometry 0 for an occluded shadow ray, whose primitive is unknown;
+/// instance `INVALID_ID` outside instanced scenes).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Answers {
     pub t: Vec<f32>,
     pub geom: Vec<u32>,
     pub prim: Vec<u32>,
+    pub inst: Vec<u32>,
+}
+
+/// One chunk of [`Answers`] being filled.
+pub(crate) struct AnswerSlice<'a> {
+    t: &'a mut [f32],
+    geom: &'a mut [u32],
+    prim: &'a mut [u32],
+    inst: &'a mut [u32],
+}
+
+impl AnswerSlice<'_> {
+    fn len(&self) -> usize {
+        self.t.len()
+    }
+
+    #[inline]
+    fn set(&mut self, k: usize, (t, g, p, i): (f32, u32, u32, u32)) {
+        (self.t[k], self.geom[k], self.prim[k], self.inst[k]) = (t, g, p, i);
+    }
 }
 
 impl Answers {
     pub fn misses(n: usize) -> Self {
-        Self { t: vec![f32::INFINITY; n], geom: vec![INVALID_ID; n], prim: vec![INVALID_ID; n] }
+        Self { t: vec![f32::INFINITY; n], geom: vec![INVALID_ID; n], prim: vec![INVALID_ID; n], inst: vec![INVALID_ID; n] }
     }
 
     pub fn len(&self) -> usize {
@@ -96,12 +117,26 @@ impl Answers {
         self.geom[i] != INVALID_ID
     }
 
-    /// Runs `f(start, t, geom, prim)` over chunks of [`CHUNK`] entries in parallel.
-    fn par_fill(&mut self, f: impl Fn(usize, &mut [f32], &mut [u32], &mut [u32]) + Sync) {
-        (self.t.par_chunks_mut(CHUNK), self.geom.par_chunks_mut(CHUNK), self.prim.par_chunks_mut(CHUNK))
+    /// The triangle answer `i` names: (instance, geometry, primitive).
+    pub fn key(&self, i: usize) -> (u32, u32, u32) {
+        (self.inst[i], self.geom[i], self.prim[i])
+    }
+
+    fn set(&mut self, i: usize, (t, g, p, n): (f32, u32, u32, u32)) {
+        (self.t[i], self.geom[i], self.prim[i], self.inst[i]) = (t, g, p, n);
+    }
+
+    /// Runs `f(start, slice)` over chunks of [`CHUNK`] entries in parallel.
+    fn par_fill(&mut self, f: impl Fn(usize, &mut AnswerSlice<'_>) + Sync) {
+        (
+            self.t.par_chunks_mut(CHUNK),
+            self.geom.par_chunks_mut(CHUNK),
+            self.prim.par_chunks_mut(CHUNK),
+            self.inst.par_chunks_mut(CHUNK),
+        )
             .into_par_iter()
             .enumerate()
-            .for_each(|(k, (t, g, p))| f(k * CHUNK, t, g, p));
+            .for_each(|(k, (t, geom, prim, inst))| f(k * CHUNK, &mut AnswerSlice { t, geom, prim, inst }));
     }
 }
 
@@ -135,6 +170,8 @@ pub struct ClassResult {
     /// Whether each engine's packet and stream answers equal its single-ray answers.
     pub strahl_apis_consistent: f64,
     pub embree_apis_consistent: f64,
+    /// Instanced scenes built flat too: strahl instanced against strahl flattened.
+    pub flat_agreement: Option<FlatAgreement>,
 }
 
 impl ClassResult {
@@ -184,6 +221,7 @@ pub fn embree_stats(spec: &SceneSpec, threads: usize) -> Option<Vec<(f64, f64)>>
     let arg = match &spec.source {
         crate::scenes::Source::Obj(p) => p.to_string_lossy().into_owned(),
         crate::scenes::Source::Sphereflake { .. } => "sphereflake".to_string(),
+        crate::scenes::Source::SceneFile(_) => return None,
     };
     let exe = std::env::current_exe().ok()?;
     let out = std::process::Command::new(exe)
@@ -208,12 +246,47 @@ pub struct SceneResult {
     pub triangles: usize,
     pub build: BuildResult,
     pub classes: Vec<ClassResult>,
+    /// Figures of an instanced scene; `None` for a flat one.
+    pub instanced: Option<InstancedInfo>,
     /// A shaded picture of the primary hits (RGB, `width × width`).
     pub image: Vec<u8>,
     pub width: u32,
     /// The ray sets and strahl's and Embree's answers, for `--dump-rays`.
     pub ray_sets: Vec<(Class, RayStream, Answers, Answers)>,
 }
+
+/// What an instanced scene adds to the report.
+#[derive(Clone, Debug, Serialize)]
+pub struct InstancedInfo {
+    pub instances: usize,
+    /// Triangles over all instances (each instance counts its object's triangles).
+    pub instanced_triangles: u64,
+    /// Triangles stored once per object.
+    pub unique_triangles: usize,
+    /// strahl's instanced build: object BVHs, top level and instance records.
+    pub memory_bytes: usize,
+    /// The flattened build: measured where it was built, else estimated from each object's bytes
+    /// per triangle (`flattened_measured` says which).
+    pub flattened_memory_bytes: u64,
+    pub flattened_measured: bool,
+    /// Wall time of the flattened build, if it was built.
+    pub flattened_build_ms: Option<f64>,
+}
+
+/// Instanced against flattened strahl on the same rays.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct FlatAgreement {
+    pub rays: usize,
+    pub hit_miss_agreement: f64,
+    /// `|t_instanced − t_flattened|` in units in the last place of the flattened t, over rays both
+    /// hit: median, 99.9th percentile, largest.
+    pub t_ulps_median: f64,
+    pub t_ulps_p999: f64,
+    pub t_ulps_max: f64,
+}
+
+/// Flattened builds past this many triangles are estimated, not built (memory and time).
+pub const FLATTEN_LIMIT: u64 = 40_000_000;
 
 /// Harness settings.
 #[derive(Clone, Debug)]
@@ -232,6 +305,16 @@ impl Default for Settings {
     }
 }
 
+/// A scene built by both engines, ready for rays.
+struct Built<'a, Q: Query> {
+    scene: &'a Q,
+    escene: &'a embree::Scene,
+    world: &'a dyn accuracy::World,
+    bounds: Option<(Vec3, Vec3)>,
+    /// The flattened build of an instanced scene, to compare with.
+    flat: Option<&'a Scene>,
+}
+
 /// Runs one scene through both engines.
 pub fn run_scene(
     spec: &SceneSpec,
@@ -241,6 +324,9 @@ pub fn run_scene(
     mut progress: impl FnMut(&str),
 ) -> anyhow::Result<SceneResult> {
     progress("loading");
+    if let Some(file) = spec.scene_file()? {
+        return run_instanced(spec, &file, pool, device, settings, progress);
+    }
     let meshes = spec.load()?;
     let triangles: usize = meshes.iter().map(|m| m.triangle_count()).sum();
 
@@ -278,15 +364,128 @@ pub fn run_scene(
         embree_sah: None,
         embree_high_sah: None,
     };
-
-    // Ray sets, all derived from strahl's primary hits so both engines trace identical rays.
     let ((eye, at), light) = spec.view_and_light(scene.bounds());
     let camera = Camera::look_at(eye, at, Vec3::Y, 60.0);
+    let world = accuracy::Flat(&meshes);
+    let built = Built { scene: &scene, escene: &escene, world: &world, bounds: scene.bounds(), flat: None };
+    let (classes, ray_sets, image) = run_rays(&built, &camera, light, pool, settings, progress);
+    Ok(SceneResult { name: spec.name.clone(), triangles, build, classes, instanced: None, image, width: settings.width, ray_sets })
+}
+
+/// Runs one instanced scene (a scene file) through both engines, and through strahl flattened
+/// where that fits.
+fn run_instanced(
+    spec: &SceneSpec,
+    file: &strahl::SceneFile,
+    pool: &rayon::ThreadPool,
+    device: &embree::Device,
+    settings: &Settings,
+    mut progress: impl FnMut(&str),
+) -> anyhow::Result<SceneResult> {
+    let objects = file.load_objects()?;
+    progress("building");
+    let cfg = BuildConfig::default();
+    let mut scene = None;
+    let mut strahl_ms = f64::INFINITY;
+    for _ in 0..settings.build_repeats.max(1) {
+        let s = pool.install(|| InstancedScene::build(objects.clone(), file.instances.clone(), &cfg))?;
+        strahl_ms = strahl_ms.min(s.stats().objects_build_ms + s.stats().top_build_ms);
+        scene = Some(s);
+    }
+    let scene = scene.expect("built at least once");
+    let xfms: Vec<(usize, [f32; 12])> = file
+        .instances
+        .iter()
+        .map(|i| {
+            let m = i.transform;
+            let mut c = [0.0f32; 12];
+            for (k, col) in [m.matrix3.x_axis, m.matrix3.y_axis, m.matrix3.z_axis, m.translation].iter().enumerate() {
+                c[3 * k..3 * k + 3].copy_from_slice(&col.to_array());
+            }
+            (i.object, c)
+        })
+        .collect();
+    let mut embree_ms = f64::INFINITY;
+    let mut escene = None;
+    for _ in 0..settings.build_repeats.max(1) {
+        let e = embree::Scene::build_instanced(device, &objects, &xfms, embree::Quality::Medium)?;
+        embree_ms = embree_ms.min(e.build_ms);
+        escene = Some(e);
+    }
+    let escene = escene.expect("built at least once");
+    let st = scene.stats().clone();
+    let flat = if st.instanced_triangles <= FLATTEN_LIMIT {
+        progress("flattening");
+        Some(pool.install(|| scene.flatten(&cfg))?)
+    } else {
+        None
+    };
+    let instanced = InstancedInfo {
+        instances: st.instances,
+        instanced_triangles: st.instanced_triangles,
+        unique_triangles: st.unique_triangles,
+        memory_bytes: st.bytes,
+        flattened_memory_bytes: flat.as_ref().map_or(st.flattened_bytes, |f| f.stats().bytes as u64),
+        flattened_measured: flat.is_some(),
+        flattened_build_ms: flat.as_ref().map(|f| f.stats().build_ms),
+    };
+    let object_stats: Vec<_> = scene.objects().iter().map(|o| o.stats().clone()).collect();
+    let build = BuildResult {
+        strahl_ms,
+        embree_ms,
+        embree_high_ms: f64::NAN,
+        strahl_sah: f64::NAN,
+        strahl_bytes_per_tri: st.bytes as f64 / st.unique_triangles.max(1) as f64,
+        strahl_bytes: st.bytes,
+        strahl_inner_nodes: object_stats.iter().map(|s| s.inner_nodes).sum(),
+        strahl_leaves: object_stats.iter().map(|s| s.leaves).sum(),
+        strahl_depth: object_stats.iter().map(|s| s.depth).max().unwrap_or(0),
+        embree_bytes_per_tri: None,
+        embree_sah: None,
+        embree_high_sah: None,
+    };
+    let bounds = scene.bounds();
+    let camera = match &file.camera {
+        Some(c) => c.camera(),
+        None => {
+            let ((eye, at), _) = spec.view_and_light(bounds);
+            Camera::look_at(eye, at, Vec3::Y, 60.0)
+        }
+    };
+    let light = file.lights.first().map_or(spec.view_and_light(bounds).1, |l| l.position);
+    let world = accuracy::InstancedWorld::new(&objects, &file.instances);
+    let built = Built { scene: &scene, escene: &escene, world: &world, bounds, flat: flat.as_ref() };
+    let (classes, ray_sets, image) = run_rays(&built, &camera, light, pool, settings, progress);
+    Ok(SceneResult {
+        name: spec.name.clone(),
+        triangles: st.unique_triangles,
+        build,
+        classes,
+        instanced: Some(instanced),
+        image,
+        width: settings.width,
+        ray_sets,
+    })
+}
+
+type RaySets = Vec<(Class, RayStream, Answers, Answers)>;
+
+/// Generates the three ray classes from the camera and light, traces them through both engines
+/// (and the flattened build, if any), and shades a picture.
+fn run_rays<Q: Query>(
+    b: &Built<'_, Q>,
+    camera: &Camera,
+    light: Vec3,
+    pool: &rayon::ThreadPool,
+    settings: &Settings,
+    mut progress: impl FnMut(&str),
+) -> (Vec<ClassResult>, RaySets, Vec<u8>) {
+    // Ray sets, all derived from strahl's primary hits so both engines trace identical rays.
     let w = settings.width;
-    let (primary, pixels) = raygen::primary(&camera, w, w);
+    let (primary, pixels) = raygen::primary(camera, w, w);
     let mut primary_hits = HitStream::default();
-    pool.install(|| scene.intersect_stream_par(&primary, &mut primary_hits, Coherence::Coherent));
-    let diag = scene.bounds().map(|(lo, hi)| (hi - lo).length()).unwrap_or(1.0);
+    pool.install(|| b.scene.intersect_stream_par(&primary, &mut primary_hits, Coherence::Coherent));
+    let diag = b.bounds.map(|(lo, hi)| (hi - lo).length()).unwrap_or(1.0);
     let eps = 1e-4 * diag;
     let (shadow, shadow_src) = raygen::shadow(&primary, &primary_hits, light, eps);
     let (diffuse, _) = raygen::diffuse(&primary, &primary_hits, settings.seed, eps);
@@ -296,7 +495,12 @@ pub fn run_scene(
     let mut shadow_answers = None;
     for (class, rays) in [(Class::Primary, &primary), (Class::Shadow, &shadow), (Class::Diffuse, &diffuse)] {
         progress(class.name());
-        let (result, s_ans, e_ans) = run_class(&scene, &escene, &meshes, rays, class, pool, settings);
+        let (mut result, s_ans, e_ans) = run_class(b.scene, b.escene, b.world, rays, class, pool, settings);
+        if let Some(flat) = b.flat {
+            let mut f_ans = Answers::misses(rays.len());
+            pool.install(|| strahl_single(flat, rays, class, &mut f_ans));
+            result.flat_agreement = Some(flat_agreement(&s_ans, &f_ans));
+        }
         if class == Class::Shadow {
             shadow_answers = Some(s_ans.clone());
         }
@@ -305,16 +509,37 @@ pub fn run_scene(
         }
         classes.push(result);
     }
-
     let image = shade(&primary, &primary_hits, &pixels, &shadow_src, shadow_answers.as_ref(), w);
-    Ok(SceneResult { name: spec.name.clone(), triangles, build, classes, image, width: w, ray_sets })
+    (classes, ray_sets, image)
+}
+
+/// Hit/miss agreement and `t` difference in ulps between two answer sets of the same rays.
+pub fn flat_agreement(a: &Answers, f: &Answers) -> FlatAgreement {
+    let n = a.len();
+    let agree = (0..n).filter(|&i| a.hit(i) == f.hit(i)).count();
+    let mut ulps: Vec<f64> = (0..n)
+        .filter(|&i| a.hit(i) && f.hit(i) && f.t[i] > 0.0)
+        .map(|i| {
+            let ulp = (f.t[i].next_up() - f.t[i]) as f64;
+            (a.t[i] as f64 - f.t[i] as f64).abs() / ulp
+        })
+        .collect();
+    ulps.sort_by(f64::total_cmp);
+    let q = |x: f64| if ulps.is_empty() { 0.0 } else { ulps[((ulps.len() - 1) as f64 * x).round() as usize] };
+    FlatAgreement {
+        rays: n,
+        hit_miss_agreement: if n == 0 { 1.0 } else { agree as f64 / n as f64 },
+        t_ulps_median: q(0.5),
+        t_ulps_p999: q(0.999),
+        t_ulps_max: ulps.last().copied().unwrap_or(0.0),
+    }
 }
 
 /// Traces one ray set through all APIs of both engines, interleaved, and diffs the answers.
-fn run_class(
-    scene: &Scene,
+fn run_class<Q: Query>(
+    scene: &Q,
     escene: &embree::Scene,
-    meshes: &[TriangleMesh],
+    world: &dyn accuracy::World,
     rays: &RayStream,
     class: Class,
     pool: &rayon::ThreadPool,
@@ -371,15 +596,14 @@ fn run_class(
     }
     let [s, e] = answers;
     let consistent = |a: &[Answers; 3]| {
-        let same =
-            (0..n).filter(|&i| (1..3).all(|k| a[k].geom[i] == a[0].geom[i] && a[k].prim[i] == a[0].prim[i])).count();
+        let same = (0..n).filter(|&i| (1..3).all(|k| a[k].key(i) == a[0].key(i))).count();
         if n == 0 { 1.0 } else { same as f64 / n as f64 }
     };
     let strahl_apis_consistent = consistent(&s);
     let embree_apis_consistent = consistent(&e);
     let [s_single, _, _] = s;
     let [e_single, _, _] = e;
-    let acc = accuracy::compare(meshes, rays, class.occlusion(), &s_single, &e_single);
+    let acc = accuracy::compare(world, rays, class.occlusion(), &s_single, &e_single);
     let hit_rate = if n == 0 { 0.0 } else { (0..n).filter(|&i| s_single.hit(i)).count() as f64 / n as f64 };
     let result = ClassResult {
         class,
@@ -389,6 +613,7 @@ fn run_class(
         samples,
         strahl_apis_consistent,
         embree_apis_consistent,
+        flat_agreement: None,
     };
     (result, s_single, e_single)
 }
@@ -397,47 +622,52 @@ fn coherence(class: Class) -> Coherence {
     if class.coherent() { Coherence::Coherent } else { Coherence::Incoherent }
 }
 
-pub(crate) fn strahl_single(scene: &Scene, rays: &RayStream, class: Class, out: &mut Answers) {
-    out.par_fill(|start, t, g, p| {
-        for k in 0..t.len() {
+/// A miss, and an occluded shadow ray (whose primitive any-hit queries do not report).
+const MISS: (f32, u32, u32, u32) = (f32::INFINITY, INVALID_ID, INVALID_ID, INVALID_ID);
+const OCCLUDED: (f32, u32, u32, u32) = (0.0, 0, 0, INVALID_ID);
+
+fn occlusion_answer(o: bool) -> (f32, u32, u32, u32) {
+    if o { OCCLUDED } else { MISS }
+}
+
+fn hit_answer(h: Option<strahl::Hit>) -> (f32, u32, u32, u32) {
+    h.map_or(MISS, |h| (h.t, h.geom_id, h.prim_id, h.inst_id))
+}
+
+fn embree_answer(t: f32, geom: u32, prim: u32, inst: u32) -> (f32, u32, u32, u32) {
+    if geom != RTC_INVALID_GEOMETRY_ID { (t, geom, prim, inst) } else { MISS }
+}
+
+pub(crate) fn strahl_single<Q: Query>(scene: &Q, rays: &RayStream, class: Class, out: &mut Answers) {
+    out.par_fill(|start, o| {
+        for k in 0..o.len() {
             let r = rays.get(start + k);
-            if class.occlusion() {
-                let o = scene.occluded(&r);
-                (t[k], g[k], p[k]) = if o { (0.0, 0, 0) } else { (f32::INFINITY, INVALID_ID, INVALID_ID) };
-            } else {
-                (t[k], g[k], p[k]) = match scene.intersect(&r) {
-                    Some(h) => (h.t, h.geom_id, h.prim_id),
-                    None => (f32::INFINITY, INVALID_ID, INVALID_ID),
-                };
-            }
+            o.set(k, if class.occlusion() { occlusion_answer(scene.occluded(&r)) } else { hit_answer(scene.intersect(&r)) });
         }
     });
 }
 
-pub(crate) fn strahl_packet(scene: &Scene, rays: &RayStream, class: Class, out: &mut Answers) {
-    out.par_fill(|start, t, g, p| {
-        let mut hp = HitPacket::default();
-        for k in (0..t.len()).step_by(PACKET_WIDTH) {
-            let m = (t.len() - k).min(PACKET_WIDTH);
+pub(crate) fn strahl_packet<Q: Query>(scene: &Q, rays: &RayStream, class: Class, out: &mut Answers) {
+    out.par_fill(|start, o| {
+        for k in (0..o.len()).step_by(PACKET_WIDTH) {
+            let m = (o.len() - k).min(PACKET_WIDTH);
             let packet = rays.packet(start + k, m);
             if class.occlusion() {
                 let bits = scene.occluded_packet(&packet);
                 for l in 0..m {
-                    let o = bits & (1 << l) != 0;
-                    (t[k + l], g[k + l], p[k + l]) =
-                        if o { (0.0, 0, 0) } else { (f32::INFINITY, INVALID_ID, INVALID_ID) };
+                    o.set(k + l, occlusion_answer(bits & (1 << l) != 0));
                 }
             } else {
-                scene.intersect_packet(&packet, &mut hp);
-                t[k..k + m].copy_from_slice(&hp.t[..m]);
-                g[k..k + m].copy_from_slice(&hp.geom_id[..m]);
-                p[k..k + m].copy_from_slice(&hp.prim_id[..m]);
+                for l in 0..m {
+                    o.set(k + l, MISS);
+                }
+                scene.intersect_packet_each(&packet, |l, h| o.set(k + l, hit_answer(Some(*h))));
             }
         }
     });
 }
 
-fn strahl_stream(scene: &Scene, rays: &RayStream, class: Class, hits: &mut HitStream, occ: &mut Vec<bool>) {
+fn strahl_stream<Q: Query>(scene: &Q, rays: &RayStream, class: Class, hits: &mut HitStream, occ: &mut Vec<bool>) {
     if class.occlusion() {
         scene.occluded_stream_par(rays, occ, coherence(class));
     } else {
@@ -447,12 +677,7 @@ fn strahl_stream(scene: &Scene, rays: &RayStream, class: Class, hits: &mut HitSt
 
 fn collect_strahl(class: Class, hits: &HitStream, occ: &[bool], out: &mut Answers) {
     for i in 0..out.len() {
-        if class.occlusion() {
-            (out.t[i], out.geom[i], out.prim[i]) =
-                if occ[i] { (0.0, 0, 0) } else { (f32::INFINITY, INVALID_ID, INVALID_ID) };
-        } else {
-            (out.t[i], out.geom[i], out.prim[i]) = (hits.t[i], hits.geom_id[i], hits.prim_id[i]);
-        }
+        out.set(i, if class.occlusion() { occlusion_answer(occ[i]) } else { hit_answer(hits.get(i)) });
     }
 }
 
@@ -489,21 +714,16 @@ fn embree_stream_rays(rays: &RayStream) -> Vec<RTCRayHit> {
 
 pub(crate) fn embree_single(scene: &embree::Scene, rays: &RayStream, class: Class, out: &mut Answers) {
     let coherent = class.coherent();
-    out.par_fill(|start, t, g, p| {
-        for k in 0..t.len() {
+    out.par_fill(|start, o| {
+        for k in 0..o.len() {
             if class.occlusion() {
                 let mut r = embree_ray(rays, start + k);
                 scene.occluded1(&mut r, coherent);
-                let o = r.tfar == f32::NEG_INFINITY;
-                (t[k], g[k], p[k]) = if o { (0.0, 0, 0) } else { (f32::INFINITY, INVALID_ID, INVALID_ID) };
+                o.set(k, occlusion_answer(r.tfar == f32::NEG_INFINITY));
             } else {
                 let mut rh = RTCRayHit { ray: embree_ray(rays, start + k), hit: empty_hit() };
                 scene.intersect1(&mut rh, coherent);
-                (t[k], g[k], p[k]) = if rh.hit.geomID != RTC_INVALID_GEOMETRY_ID {
-                    (rh.ray.tfar, rh.hit.geomID, rh.hit.primID)
-                } else {
-                    (f32::INFINITY, INVALID_ID, INVALID_ID)
-                };
+                o.set(k, embree_answer(rh.ray.tfar, rh.hit.geomID, rh.hit.primID, rh.hit.instID[0]));
             }
         }
     });
@@ -511,7 +731,7 @@ pub(crate) fn embree_single(scene: &embree::Scene, rays: &RayStream, class: Clas
 
 pub(crate) fn embree_packet(scene: &embree::Scene, rays: &RayStream, class: Class, out: &mut Answers) {
     let coherent = class.coherent();
-    out.par_fill(|start, t, g, p| {
+    out.par_fill(|start, o| {
         let mut rh = Box::new(RTCRayHit16 {
             ray: RTCRay16 {
                 org_x: [0.0; 16],
@@ -538,8 +758,8 @@ pub(crate) fn embree_packet(scene: &embree::Scene, rays: &RayStream, class: Clas
                 instID: [[RTC_INVALID_GEOMETRY_ID; 16]],
             },
         });
-        for k in (0..t.len()).step_by(16) {
-            let m = (t.len() - k).min(16);
+        for k in (0..o.len()).step_by(16) {
+            let m = (o.len() - k).min(16);
             let mut valid = [0i32; 16];
             let r = &mut rh.ray;
             for l in 0..m {
@@ -558,20 +778,15 @@ pub(crate) fn embree_packet(scene: &embree::Scene, rays: &RayStream, class: Clas
             if class.occlusion() {
                 scene.occluded16(&valid, &mut rh.ray, coherent);
                 for l in 0..m {
-                    let o = rh.ray.tfar[l] == f32::NEG_INFINITY;
-                    (t[k + l], g[k + l], p[k + l]) =
-                        if o { (0.0, 0, 0) } else { (f32::INFINITY, INVALID_ID, INVALID_ID) };
+                    o.set(k + l, occlusion_answer(rh.ray.tfar[l] == f32::NEG_INFINITY));
                 }
             } else {
                 rh.hit.geomID = [RTC_INVALID_GEOMETRY_ID; 16];
+                rh.hit.instID = [[RTC_INVALID_GEOMETRY_ID; 16]];
                 scene.intersect16(&valid, &mut rh, coherent);
                 for l in 0..m {
-                    let gid = rh.hit.geomID[l];
-                    (t[k + l], g[k + l], p[k + l]) = if gid != RTC_INVALID_GEOMETRY_ID {
-                        (rh.ray.tfar[l], gid, rh.hit.primID[l])
-                    } else {
-                        (f32::INFINITY, INVALID_ID, INVALID_ID)
-                    };
+                    let h = &rh.hit;
+                    o.set(k + l, embree_answer(rh.ray.tfar[l], h.geomID[l], h.primID[l], h.instID[0][l]));
                 }
             }
         }
@@ -589,18 +804,15 @@ fn embree_stream(scene: &embree::Scene, class: Class, rh: &mut [RTCRayHit], r: &
 
 fn collect_embree(class: Class, rh: &[RTCRayHit], r: &[RTCRay], out: &mut Answers) {
     for i in 0..out.len() {
-        if class.occlusion() {
-            let o = r[i].tfar == f32::NEG_INFINITY;
-            (out.t[i], out.geom[i], out.prim[i]) =
-                if o { (0.0, 0, 0) } else { (f32::INFINITY, INVALID_ID, INVALID_ID) };
-        } else {
-            let h = &rh[i];
-            (out.t[i], out.geom[i], out.prim[i]) = if h.hit.geomID != RTC_INVALID_GEOMETRY_ID {
-                (h.ray.tfar, h.hit.geomID, h.hit.primID)
+        out.set(
+            i,
+            if class.occlusion() {
+                occlusion_answer(r[i].tfar == f32::NEG_INFINITY)
             } else {
-                (f32::INFINITY, INVALID_ID, INVALID_ID)
-            };
-        }
+                let h = &rh[i];
+                embree_answer(h.ray.tfar, h.hit.geomID, h.hit.primID, h.hit.instID[0])
+            },
+        );
     }
 }
 
@@ -637,8 +849,8 @@ fn shade(
 }
 
 /// Traces `rays` once with each engine's single-ray API (for ray files and tests).
-pub fn trace_once(
-    scene: &Scene,
+pub fn trace_once<Q: Query>(
+    scene: &Q,
     escene: &embree::Scene,
     rays: &RayStream,
     class: Class,
@@ -651,4 +863,56 @@ pub fn trace_once(
         embree_single(escene, rays, class, &mut e);
     });
     (s, e)
+}
+
+/// One row of the translation sweep: a class of rays at one translation.
+#[derive(Clone, Debug, Serialize)]
+pub struct TranslationRow {
+    pub translation: f64,
+    pub class: &'static str,
+    pub agreement: FlatAgreement,
+}
+
+/// Translations of the sweep: the world, camera and light moved by `(T, T, T)`.
+pub const TRANSLATIONS: [f32; 7] = [1.0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6];
+
+/// Builds the scene file's world instanced and flattened at every translation of
+/// [`TRANSLATIONS`] and compares the two on primary, shadow and diffuse rays (`width²` primary
+/// rays; secondary rays leave the surface by `offset_ray_origin`, which scales with the
+/// coordinates, so the epsilon does not decide the outcome far out).
+pub fn translation_sweep(
+    file: &strahl::SceneFile,
+    pool: &rayon::ThreadPool,
+    width: u32,
+    seed: u64,
+) -> anyhow::Result<Vec<TranslationRow>> {
+    let objects = file.load_objects()?;
+    let cam = file.camera.ok_or_else(|| anyhow::anyhow!("{}: the sweep needs a camera", file.path.display()))?;
+    let light = file.lights.first().map_or(cam.eye, |l| l.position);
+    let cfg = BuildConfig::default();
+    let mut rows = Vec::new();
+    for &t in &TRANSLATIONS {
+        let shift = Vec3::splat(t);
+        let m = glam::Affine3A::from_translation(shift);
+        let instances: Vec<strahl::Instance> =
+            file.instances.iter().map(|i| strahl::Instance::new(i.object, m * i.transform)).collect();
+        let scene = pool.install(|| InstancedScene::build(objects.clone(), instances, &cfg))?;
+        let flat = pool.install(|| scene.flatten(&cfg))?;
+        let camera = Camera::look_at(cam.eye + shift, cam.look_at + shift, cam.up, cam.fov_deg);
+        let (primary, _) = raygen::primary(&camera, width, width);
+        let mut hits = HitStream::default();
+        pool.install(|| scene.intersect_stream_par(&primary, &mut hits, Coherence::Coherent));
+        let (shadow, _) = raygen::shadow_with(&primary, &hits, light + shift, raygen::Offset::Normal);
+        let (diffuse, _) = raygen::diffuse_with(&primary, &hits, seed, raygen::Offset::Normal);
+        for (class, rays) in [(Class::Primary, &primary), (Class::Shadow, &shadow), (Class::Diffuse, &diffuse)] {
+            let mut a = Answers::misses(rays.len());
+            let mut f = Answers::misses(rays.len());
+            pool.install(|| {
+                strahl_single(&scene, rays, class, &mut a);
+                strahl_single(&flat, rays, class, &mut f);
+            });
+            rows.push(TranslationRow { translation: t as f64, class: class.name(), agreement: flat_agreement(&a, &f) });
+        }
+    }
+    Ok(rows)
 }

@@ -134,17 +134,29 @@ fn main() -> anyhow::Result<()> {
         }
         report::write_image(&args.out.join(format!("{}.png", r.name)), &r.image, r.width)?;
         if let Some(dir) = &args.dump_rays {
-            dump(dir, spec, &r)?;
+            if r.instanced.is_none() {
+                dump(dir, spec, &r)?;
+            } else {
+                eprintln!("--dump-rays: {} is instanced; its rays are not written", r.name);
+            }
         }
         results.push(r);
     }
     bar.finish_and_clear();
 
     let mut rep = report::build_report(&results, args.threads, args.width, args.passes);
+    // Instanced against flattened with the world moved out to 1e6, on the forest scene.
+    if let Some(spec) = specs.iter().find(|s| s.name == "forest") {
+        if let Some(file) = spec.scene_file()? {
+            eprintln!("instancing: instanced vs flattened at translations 1 to 1e6 ({})", file.path.display());
+            rep.instancing_translations = harness::translation_sweep(&file, &pool, args.width.min(512), settings.seed)?;
+        }
+    }
     if args.accuracy {
         let scenes_rays: Vec<methods::SceneRays> = specs
             .iter()
             .zip(&results)
+            .filter(|(spec, _)| !matches!(spec.source, scenes::Source::SceneFile(_)))
             .map(|(spec, r)| {
                 Ok(methods::SceneRays {
                     meshes: spec.load()?,
@@ -216,7 +228,7 @@ fn trace_file(args: &Args, rays_path: &Path, pool: &rayon::ThreadPool, device: &
     let escene = embree::Scene::build(device, &meshes, embree::Quality::Medium, false)?;
     let class = if args.occlusion { Class::Shadow } else { Class::Diffuse };
     let (s, e) = harness::trace_once(&scene, &escene, &rays, class, pool);
-    let acc = compare::accuracy::compare(&meshes, &rays, args.occlusion, &s, &e);
+    let acc = compare::accuracy::compare(&compare::accuracy::Flat(&meshes), &rays, args.occlusion, &s, &e);
     std::fs::create_dir_all(&args.out)?;
     let offsets = rayfile::offsets(&meshes);
     let stem = rays_path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "rays".into());

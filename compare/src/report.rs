@@ -19,8 +19,13 @@ pub struct Report {
     pub width: u32,
     pub passes: usize,
     pub scenes: Vec<SceneJson>,
-    /// Geometric mean over scenes × classes of the best-vs-best ratio.
+    /// Geometric mean over flat scenes × classes of the best-vs-best ratio.
     pub geomean_best_ratio: f64,
+    /// The same over instanced scenes × classes (0 if none ran).
+    pub geomean_best_ratio_instanced: f64,
+    /// Instanced against flattened strahl with the world moved away from the origin.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub instancing_translations: Vec<crate::harness::TranslationRow>,
     /// Every triangle test × box test against Embree's modes (with `--accuracy`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub accuracy: Option<crate::methods::AccuracyReport>,
@@ -32,6 +37,17 @@ pub struct SceneJson {
     pub triangles: usize,
     pub build: BuildResult,
     pub build_ratio: f64,
+    pub instanced: bool,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub instances: Option<usize>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub instanced_triangles: Option<u64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub memory_bytes: Option<usize>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub flattened_memory_bytes: Option<u64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub instancing: Option<crate::harness::InstancedInfo>,
     pub classes: Vec<ClassJson>,
 }
 
@@ -67,6 +83,10 @@ pub struct ClassJson {
     pub best_api: (&'static str, &'static str),
     pub strahl_apis_consistent: f64,
     pub embree_apis_consistent: f64,
+    /// Instanced scenes: strahl instanced against strahl flattened on the same rays (`null` where
+    /// the flattened world was too large to build).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub flat_agreement: Option<Option<crate::harness::FlatAgreement>>,
 }
 
 fn apis(c: &ClassResult, engine: usize, median: bool) -> Apis {
@@ -83,6 +103,7 @@ fn ratio(a: f64, b: f64) -> f64 {
 
 pub fn build_report(results: &[SceneResult], threads: usize, width: u32, passes: usize) -> Report {
     let mut logs = Vec::new();
+    let mut logs_inst = Vec::new();
     let scenes = results
         .iter()
         .map(|r| SceneJson {
@@ -90,13 +111,19 @@ pub fn build_report(results: &[SceneResult], threads: usize, width: u32, passes:
             triangles: r.triangles,
             build: r.build.clone(),
             build_ratio: ratio(r.build.strahl_ms, r.build.embree_ms),
+            instanced: r.instanced.is_some(),
+            instances: r.instanced.as_ref().map(|i| i.instances),
+            instanced_triangles: r.instanced.as_ref().map(|i| i.instanced_triangles),
+            memory_bytes: r.instanced.as_ref().map(|i| i.memory_bytes),
+            flattened_memory_bytes: r.instanced.as_ref().map(|i| i.flattened_memory_bytes),
+            instancing: r.instanced.clone(),
             classes: r
                 .classes
                 .iter()
                 .map(|c| {
                     let br = c.best_ratio();
                     if br > 0.0 {
-                        logs.push(br.ln());
+                        if r.instanced.is_some() { &mut logs_inst } else { &mut logs }.push(br.ln());
                     }
                     ClassJson {
                         class: c.class.name(),
@@ -120,12 +147,13 @@ pub fn build_report(results: &[SceneResult], threads: usize, width: u32, passes:
                         best_api: (c.best(0).0.name(), c.best(1).0.name()),
                         strahl_apis_consistent: c.strahl_apis_consistent,
                         embree_apis_consistent: c.embree_apis_consistent,
+                        flat_agreement: r.instanced.as_ref().map(|_| c.flat_agreement.clone()),
                     }
                 })
                 .collect(),
         })
         .collect();
-    let geomean = if logs.is_empty() { 0.0 } else { (logs.iter().sum::<f64>() / logs.len() as f64).exp() };
+    let gm = |l: &[f64]| if l.is_empty() { 0.0 } else { (l.iter().sum::<f64>() / l.len() as f64).exp() };
     Report {
         threads,
         date: today(),
@@ -134,7 +162,9 @@ pub fn build_report(results: &[SceneResult], threads: usize, width: u32, passes:
         width,
         passes,
         scenes,
-        geomean_best_ratio: geomean,
+        geomean_best_ratio: gm(&logs),
+        geomean_best_ratio_instanced: gm(&logs_inst),
+        instancing_translations: Vec::new(),
         accuracy: None,
     }
 }
@@ -185,7 +215,11 @@ pub fn markdown(r: &Report) -> String {
         "{} · {} · {} threads for both engines · {}×{} primary rays · best of {} passes · strahl {}\n",
         r.date, r.machine, r.threads, r.width, r.width, r.passes, r.strahl_commit
     );
-    let _ = writeln!(s, "Geometric mean of best-vs-best ratios (strahl/Embree): **{:.2}×**\n", r.geomean_best_ratio);
+    let _ = writeln!(
+        s,
+        "Geometric mean of best-vs-best ratios (strahl/Embree): **{:.2}×** over flat scenes, **{:.2}×** over instanced scenes\n",
+        r.geomean_best_ratio, r.geomean_best_ratio_instanced
+    );
     let _ = writeln!(s, "## Throughput (Mrays/s, best pass) and accuracy\n");
     let _ = writeln!(
         s,
@@ -245,6 +279,7 @@ pub fn markdown(r: &Report) -> String {
             b.strahl_depth
         );
     }
+    instancing_markdown(&mut s, r);
     let _ = writeln!(s, "\n## Disagreements, decided in float64\n");
     let _ = writeln!(
         s,
@@ -340,6 +375,69 @@ pub fn markdown(r: &Report) -> String {
         }
     }
     s
+}
+
+/// The instanced scenes' memory and flat agreement, and the translation sweep.
+fn instancing_markdown(s: &mut String, r: &Report) {
+    let inst: Vec<&SceneJson> = r.scenes.iter().filter(|sc| sc.instanced).collect();
+    if inst.is_empty() && r.instancing_translations.is_empty() {
+        return;
+    }
+    let _ = writeln!(s, "\n## Instancing\n");
+    let _ = writeln!(
+        s,
+        "| scene | instances | instanced triangles | unique triangles | strahl memory | flattened memory | instanced vs flattened: hit/miss agree, t ulps median / p99.9 / max (primary, shadow, diffuse) |"
+    );
+    let _ = writeln!(s, "|---|---:|---:|---:|---:|---:|---|");
+    for sc in inst {
+        let Some(i) = &sc.instancing else { continue };
+        let flat: Vec<String> = sc
+            .classes
+            .iter()
+            .map(|c| match c.flat_agreement.as_ref().and_then(|f| f.as_ref()) {
+                Some(f) => format!(
+                    "{} {}, {:.0} / {:.0} / {:.0}",
+                    c.class,
+                    pct(f.hit_miss_agreement),
+                    f.t_ulps_median,
+                    f.t_ulps_p999,
+                    f.t_ulps_max
+                ),
+                None => format!("{} –", c.class),
+            })
+            .collect();
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {} | {:.1} MiB | {:.1} MiB{} | {} |",
+            sc.name,
+            i.instances,
+            i.instanced_triangles,
+            i.unique_triangles,
+            i.memory_bytes as f64 / (1 << 20) as f64,
+            i.flattened_memory_bytes as f64 / (1 << 20) as f64,
+            if i.flattened_measured { "" } else { " (estimated)" },
+            flat.join("; ")
+        );
+    }
+    if !r.instancing_translations.is_empty() {
+        let _ = writeln!(s, "\nInstanced against flattened, the world moved by a translation:\n");
+        let _ = writeln!(s, "| translation | class | rays | hit/miss agree | t ulps median | t ulps p99.9 | t ulps max |");
+        let _ = writeln!(s, "|---:|---|---:|---:|---:|---:|---:|");
+        for t in &r.instancing_translations {
+            let f = &t.agreement;
+            let _ = writeln!(
+                s,
+                "| {:.0e} | {} | {} | {} | {:.1} | {:.1} | {:.0} |",
+                t.translation,
+                t.class,
+                f.rays,
+                pct(f.hit_miss_agreement),
+                f.t_ulps_median,
+                f.t_ulps_p999,
+                f.t_ulps_max
+            );
+        }
+    }
 }
 
 pub fn write_json(path: &Path, r: &Report) -> anyhow::Result<()> {

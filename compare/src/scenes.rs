@@ -17,6 +17,8 @@ pub enum Source {
         stacks: u32,
         slices: u32,
     },
+    /// A scene file (`strahl::SceneFile`): instances of meshes, with camera and light.
+    SceneFile(PathBuf),
 }
 
 /// A scene with its camera and light.
@@ -67,7 +69,18 @@ pub fn data(dir: &Path) -> Vec<SceneSpec> {
         light: Some(Vec3::new(278.0, 540.0, 279.0)),
     }];
     v.push(sphereflake());
+    for name in ["forest", "big_world"] {
+        let p = dir.join(format!("{name}.toml"));
+        if p.exists() {
+            v.push(scene_file(name, p));
+        }
+    }
     v
+}
+
+/// An instanced scene from a scene file; camera and light come from the file.
+pub fn scene_file(name: &str, path: PathBuf) -> SceneSpec {
+    SceneSpec { name: name.into(), source: Source::SceneFile(path), view: None, light: None }
 }
 
 /// Haines' sphereflake, 820 spheres, 433k triangles.
@@ -97,6 +110,10 @@ pub fn from_path(p: &Path) -> anyhow::Result<SceneSpec> {
     } else {
         p.to_path_buf()
     };
+    if file.extension().is_some_and(|e| e.eq_ignore_ascii_case("toml")) {
+        let stem = file.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "scene".into());
+        return Ok(scene_file(&stem, file));
+    }
     let stem = file.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "scene".into());
     let known = SHARED.iter().find(|s| Path::new(s.1).file_stem().is_some_and(|f| f.to_string_lossy() == stem));
     Ok(match known {
@@ -117,6 +134,15 @@ impl SceneSpec {
             Source::Sphereflake { levels, stacks, slices } => {
                 Ok(vec![procedural::sphereflake(*levels, *stacks, *slices)])
             }
+            Source::SceneFile(p) => bail!("{} is an instanced scene; use SceneSpec::scene_file", p.display()),
+        }
+    }
+
+    /// The parsed scene file of an instanced scene, `None` for a flat one.
+    pub fn scene_file(&self) -> anyhow::Result<Option<strahl::SceneFile>> {
+        match &self.source {
+            Source::SceneFile(p) => Ok(Some(strahl::SceneFile::read(p)?)),
+            _ => Ok(None),
         }
     }
 

@@ -1,0 +1,417 @@
+//! Scene description files: meshes (OBJ files or generated shapes), instances with transforms, a
+//! camera and lights, in TOML. The format is documented in `data/README.md`; in short:
+//!
+//! ```toml
+//! [camera]
+//! eye = [0.0, 3.0, -10.0]
+//! look_at = [0.0, 0.0, 0.0]
+//! up = [0.0, 1.0, 0.0]        # optional, +y by default
+//! fov = 60.0                  # degrees, optional
+//!
+//! [[light]]
+//! position = [10.0, 20.0, -10.0]
+//! color = [1.0, 1.0, 1.0]     # optional
+//!
+//! [mesh.flake]
+//! sphereflake = { levels = 2, stacks = 8, slices = 16 }
+//! [mesh.bunny]
+//! obj = "bunny.obj"           # relative to this file
+//! [mesh.ball]
+//! sphere = { radius = 1.0, stacks = 16, slices = 32 }
+//!
+//! [[instance]]
+//! mesh = "flake"
+//! translate = [0.0, 1.0, 0.0] # optional; then rotate (degrees about x, y, z) and scale
+//! rotate = [0.0, 45.0, 0.0]
+//! scale = 2.0                 # or [x, y, z]
+//! # matrix = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0]]  instead: rows of the 3×4 matrix
+//!
+//! [[grid]]                    # count[0]·count[1]·count[2] instances on a lattice
+//! mesh = "ball"
+//! count = [10, 1, 10]
+//! spacing = [3.0, 0.0, 3.0]
+//! origin = [0.0, 0.0, 0.0]    # optional: the centre of the lattice
+//! random_yaw = true           # optional: a seeded random turn about +y per instance
+//! scale = [0.5, 1.5]          # optional: a seeded random uniform scale in this range
+//! seed = 1
+//! ```
+//!
+//! Unknown keys, unknown mesh names, a mesh with no or two sources, and a malformed entry are
+//! [`Error::SceneFile`]s naming the file and the entry; a missing OBJ file is the loader's error.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use glam::{Affine3A, EulerRot, Mat3, Quat, Vec3};
+use serde::Deserialize;
+
+use crate::bvh::BuildConfig;
+use crate::camera::Camera;
+use crate::error::{Error, Result};
+use crate::geometry::{TriangleMesh, load_obj};
+use crate::instance::{Instance, InstancedScene};
+use crate::procedural;
+use crate::raygen::Pcg32;
+
+/// A point light.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Light {
+    pub position: Vec3,
+    pub color: Vec3,
+}
+
+/// The camera of a scene file.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CameraSpec {
+    pub eye: Vec3,
+    pub look_at: Vec3,
+    pub up: Vec3,
+    pub fov_deg: f32,
+}
+
+impl CameraSpec {
+    pub fn camera(&self) -> Camera {
+        Camera::look_at(self.eye, self.look_at, self.up, self.fov_deg)
+    }
+}
+
+/// Where a mesh's triangles come from.
+#[derive(Clone, Debug, PartialEq)]
+pub enum MeshSource {
+    /// An OBJ file (resolved against the scene file's folder); one geometry per object/group.
+    Obj(PathBuf),
+    /// [`procedural::sphereflake`].
+    Sphereflake { levels: u32, stacks: u32, slices: u32 },
+    /// [`procedural::uv_sphere`] at the origin.
+    Sphere { radius: f32, stacks: u32, slices: u32 },
+}
+
+impl MeshSource {
+    /// Loads or generates the meshes.
+    pub fn load(&self) -> Result<Vec<TriangleMesh>> {
+        Ok(match *self {
+            MeshSource::Obj(ref p) => load_obj(p)?,
+            MeshSource::Sphereflake { levels, stacks, slices } => {
+                vec![procedural::sphereflake(levels, stacks, slices)]
+            }
+            MeshSource::Sphere { radius, stacks, slices } => {
+                vec![procedural::uv_sphere(Vec3::ZERO, radius, stacks, slices)]
+            }
+        })
+    }
+}
+
+/// A parsed and checked scene file: named meshes, instances of them, camera and lights.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SceneFile {
+    pub path: PathBuf,
+    /// Mesh names and sources, in name order; instances refer to them by index.
+    pub meshes: Vec<(String, MeshSource)>,
+    pub instances: Vec<Instance>,
+    pub camera: Option<CameraSpec>,
+    pub lights: Vec<Light>,
+}
+
+impl SceneFile {
+    /// Reads and checks a scene file; meshes are not loaded yet.
+    pub fn read(path: impl AsRef<Path>) -> Result<Self> {
+        let path = path.as_ref();
+        let text = std::fs::read_to_string(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;
+        Self::parse(&text, path)
+    }
+
+    /// Parses `text` as the file at `path` (relative OBJ paths resolve against its folder).
+    pub fn parse(text: &str, path: &Path) -> Result<Self> {
+        let err = |message: String| Error::SceneFile { path: path.to_path_buf(), message };
+        let raw: RawFile = toml::from_str(text).map_err(|e| err(e.to_string()))?;
+        let base = path.parent().unwrap_or(Path::new("."));
+        let mut meshes = Vec::new();
+        for (name, m) in &raw.mesh {
+            let sources = m.obj.is_some() as u32 + m.sphereflake.is_some() as u32 + m.sphere.is_some() as u32;
+            if sources != 1 {
+                return Err(err(format!("mesh `{name}` needs exactly one of `obj`, `sphereflake`, `sphere`")));
+            }
+            let source = if let Some(p) = &m.obj {
+                MeshSource::Obj(base.join(p))
+            } else if let Some(s) = &m.sphereflake {
+                MeshSource::Sphereflake { levels: s.levels, stacks: s.stacks, slices: s.slices }
+            } else {
+                let s = m.sphere.as_ref().expect("counted above");
+                if !(s.radius.is_finite() && s.radius > 0.0) {
+                    return Err(err(format!("mesh `{name}`: sphere radius must be positive")));
+                }
+                MeshSource::Sphere { radius: s.radius, stacks: s.stacks, slices: s.slices }
+            };
+            meshes.push((name.clone(), source));
+        }
+        let index = |mesh: &str, what: &str| {
+            meshes
+                .iter()
+                .position(|(n, _)| n == mesh)
+                .ok_or_else(|| err(format!("{what} places mesh `{mesh}`, which no [mesh.{mesh}] table defines")))
+        };
+        let mut instances = Vec::new();
+        for (i, inst) in raw.instance.iter().enumerate() {
+            let what = format!("instance {i}");
+            let object = index(&inst.mesh, &what)?;
+            let transform = match &inst.matrix {
+                Some(rows) => {
+                    if inst.translate.is_some() || inst.rotate.is_some() || inst.scale.is_some() {
+                        return Err(err(format!("{what}: give `matrix` or translate/rotate/scale, not both")));
+                    }
+                    let c = |k: usize| Vec3::new(rows[0][k], rows[1][k], rows[2][k]);
+                    Affine3A::from_mat3_translation(Mat3::from_cols(c(0), c(1), c(2)), c(3))
+                }
+                None => trs(
+                    inst.translate.map_or(Vec3::ZERO, Vec3::from),
+                    inst.rotate.map_or(Vec3::ZERO, Vec3::from),
+                    inst.scale.map_or(Vec3::ONE, Scale::vec),
+                ),
+            };
+            check_transform(&transform).map_err(|m| err(format!("{what}: {m}")))?;
+            instances.push(Instance::new(object, transform));
+        }
+        for (g, grid) in raw.grid.iter().enumerate() {
+            let what = format!("grid {g}");
+            let object = index(&grid.mesh, &what)?;
+            let n = grid.count;
+            let total = n.iter().map(|&c| c as u64).product::<u64>();
+            if total == 0 || total > 1 << 26 {
+                return Err(err(format!("{what}: count {n:?} must place between 1 and 2^26 instances")));
+            }
+            let spacing = Vec3::from(grid.spacing);
+            let origin = grid.origin.map_or(Vec3::ZERO, Vec3::from);
+            let (lo_s, hi_s) = match grid.scale {
+                None => (1.0, 1.0),
+                Some(Range::Fixed(s)) => (s, s),
+                Some(Range::Between([a, b])) => (a, b),
+            };
+            let mut rng = Pcg32::new(grid.seed, g as u64);
+            let half = Vec3::new(n[0] as f32 - 1.0, n[1] as f32 - 1.0, n[2] as f32 - 1.0) * 0.5;
+            for z in 0..n[2] {
+                for y in 0..n[1] {
+                    for x in 0..n[0] {
+                        let cell = (Vec3::new(x as f32, y as f32, z as f32) - half) * spacing + origin;
+                        let yaw = if grid.random_yaw { rng.next_f32() * 360.0 } else { 0.0 };
+                        let s = lo_s + (hi_s - lo_s) * rng.next_f32();
+                        let transform = trs(cell, Vec3::new(0.0, yaw, 0.0), Vec3::splat(s));
+                        check_transform(&transform).map_err(|m| err(format!("{what}: {m}")))?;
+                        instances.push(Instance::new(object, transform));
+                    }
+                }
+            }
+        }
+        let camera = raw.camera.map(|c| CameraSpec {
+            eye: c.eye.into(),
+            look_at: c.look_at.into(),
+            up: c.up.map_or(Vec3::Y, Vec3::from),
+            fov_deg: c.fov.unwrap_or(60.0),
+        });
+        if let Some(c) = &camera {
+            let f = c.look_at - c.eye;
+            if !(f.is_finite() && c.up.is_finite())
+                || f.cross(c.up).length_squared() == 0.0
+                || !(c.fov_deg > 0.0 && c.fov_deg < 180.0)
+            {
+                return Err(err("camera: eye, look_at and up must span a view, and fov lie in (0, 180)".into()));
+            }
+        }
+        let lights = raw
+            .light
+            .iter()
+            .map(|l| Light { position: l.position.into(), color: l.color.map_or(Vec3::ONE, Vec3::from) })
+            .collect();
+        Ok(Self { path: path.to_path_buf(), meshes, instances, camera, lights })
+    }
+
+    /// Loads or generates every mesh (one object per `[mesh.*]` table, in name order).
+    pub fn load_objects(&self) -> Result<Vec<Vec<TriangleMesh>>> {
+        self.meshes.iter().map(|(_, s)| s.load()).collect()
+    }
+
+    /// Loads the meshes and builds the two-level scene.
+    pub fn build(&self, config: &BuildConfig) -> Result<InstancedScene> {
+        InstancedScene::build(self.load_objects()?, self.instances.clone(), config)
+    }
+}
+
+/// Translation · rotation (degrees about x, then y, then z) · scale.
+fn trs(t: Vec3, rot_deg: Vec3, s: Vec3) -> Affine3A {
+    let q = Quat::from_euler(EulerRot::XYZ, rot_deg.x.to_radians(), rot_deg.y.to_radians(), rot_deg.z.to_radians());
+    Affine3A::from_scale_rotation_translation(s, q, t)
+}
+
+fn check_transform(m: &Affine3A) -> std::result::Result<(), String> {
+    let det = m.matrix3.determinant();
+    if m.is_finite() && det != 0.0 && det.is_finite() {
+        Ok(())
+    } else {
+        Err("the transform is not finite and invertible".into())
+    }
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawFile {
+    camera: Option<RawCamera>,
+    #[serde(default)]
+    light: Vec<RawLight>,
+    #[serde(default)]
+    mesh: BTreeMap<String, RawMesh>,
+    #[serde(default)]
+    instance: Vec<RawInstance>,
+    #[serde(default)]
+    grid: Vec<RawGrid>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawCamera {
+    eye: [f32; 3],
+    look_at: [f32; 3],
+    up: Option<[f32; 3]>,
+    fov: Option<f32>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawLight {
+    position: [f32; 3],
+    color: Option<[f32; 3]>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawMesh {
+    obj: Option<PathBuf>,
+    sphereflake: Option<RawFlake>,
+    sphere: Option<RawSphere>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawFlake {
+    levels: u32,
+    stacks: u32,
+    slices: u32,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSphere {
+    radius: f32,
+    stacks: u32,
+    slices: u32,
+}
+
+#[derive(Clone, Copy, Deserialize)]
+#[serde(untagged)]
+enum Scale {
+    Uniform(f32),
+    Axes([f32; 3]),
+}
+
+impl Scale {
+    fn vec(self) -> Vec3 {
+        match self {
+            Scale::Uniform(s) => Vec3::splat(s),
+            Scale::Axes(a) => a.into(),
+        }
+    }
+}
+
+#[derive(Clone, Copy, Deserialize)]
+#[serde(untagged)]
+enum Range {
+    Fixed(f32),
+    Between([f32; 2]),
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawInstance {
+    mesh: String,
+    translate: Option<[f32; 3]>,
+    rotate: Option<[f32; 3]>,
+    scale: Option<Scale>,
+    matrix: Option<[[f32; 4]; 3]>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawGrid {
+    mesh: String,
+    count: [u32; 3],
+    spacing: [f32; 3],
+    origin: Option<[f32; 3]>,
+    #[serde(default)]
+    random_yaw: bool,
+    scale: Option<Range>,
+    #[serde(default)]
+    seed: u64,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<SceneFile> {
+        SceneFile::parse(text, Path::new("/scenes/test.toml"))
+    }
+
+    #[test]
+    fn parses_the_documented_example() {
+        let doc = include_str!("scene_file.rs");
+        let example: String = doc
+            .lines()
+            .skip_while(|l| !l.starts_with("//! ```toml"))
+            .skip(1)
+            .take_while(|l| !l.starts_with("//! ```"))
+            .map(|l| l.trim_start_matches("//!").trim_start_matches(' '))
+            .collect::<Vec<_>>()
+            .join("\n");
+        let f = parse(&example).unwrap();
+        assert_eq!(f.meshes.len(), 3);
+        assert_eq!(f.meshes[1].1, MeshSource::Obj(PathBuf::from("/scenes/bunny.obj")));
+        assert_eq!(f.instances.len(), 1 + 100);
+        assert_eq!(f.lights.len(), 1);
+        let c = f.camera.unwrap();
+        assert_eq!(c.fov_deg, 60.0);
+        // translate · rotate · scale: the origin goes to the translation, x to a turned, scaled x.
+        let m = f.instances[0].transform;
+        assert!((m.transform_point3(Vec3::ZERO) - Vec3::Y).length() < 1e-6);
+        let x = m.transform_vector3(Vec3::X);
+        assert!((x - Vec3::new(2.0_f32.sqrt(), 0.0, -(2.0_f32.sqrt()))).length() < 1e-5, "{x}");
+        // The lattice is centred on its origin.
+        let c: Vec3 = f.instances[1..].iter().map(|i| i.transform.translation.into()).fold(Vec3::ZERO, |a, b: Vec3| a + b);
+        assert!(c.length() < 1e-3, "{c}");
+    }
+
+    #[test]
+    fn clear_errors_for_malformed_files() {
+        let cases = [
+            ("[[instance]]\nmesh = \"nope\"", "no [mesh.nope] table"),
+            ("[mesh.a]\nsphere = { radius = 1.0, stacks = 4, slices = 8 }\nobj = \"a.obj\"", "exactly one of"),
+            ("[mesh.a]\n", "exactly one of"),
+            ("[mesh.a]\nsphere = { radius = -1.0, stacks = 4, slices = 8 }", "radius"),
+            ("[mesh.a]\nobj = \"a.obj\"\n[[instance]]\nmesh = \"a\"\nscale = 0.0", "not finite and invertible"),
+            ("[mesh.a]\nobj = \"a.obj\"\n[[instance]]\nmesh = \"a\"\nsclae = 2.0", "unknown field"),
+            ("[mesh.a]\nobj = \"a.obj\"\n[[grid]]\nmesh = \"a\"\ncount = [0, 1, 1]\nspacing = [1, 1, 1]", "count"),
+            ("[camera]\neye = [0, 0, 0]\nlook_at = [0, 0, 0]", "camera"),
+            ("[camera\n", "TOML"),
+            ("[mesh.a]\nobj = \"a.obj\"\n[[instance]]\nmesh = \"a\"\nmatrix = [[1, 0, 0, 0], [0, 1, 0]]", "line 5"),
+        ];
+        for (text, needle) in cases {
+            let e = parse(text).expect_err(text);
+            assert!(matches!(e, Error::SceneFile { .. }), "{text}: {e:?}");
+            let msg = e.to_string();
+            assert!(msg.contains("/scenes/test.toml"), "{msg}");
+            assert!(msg.to_lowercase().contains(&needle.to_lowercase()) || needle == "TOML", "{text}: {msg}");
+        }
+        // A mesh file that does not exist fails when loading, naming the file.
+        let f = parse("[mesh.a]\nobj = \"missing.obj\"\n[[instance]]\nmesh = \"a\"").unwrap();
+        let e = f.build(&BuildConfig::default()).unwrap_err();
+        assert!(e.to_string().contains("missing.obj"), "{e}");
+        assert!(matches!(SceneFile::read("/nonexistent/x.toml"), Err(Error::Io { .. })));
+    }
+}
