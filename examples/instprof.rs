@@ -1,0 +1,36 @@
+//! Profiling aid: traces a scene file's primary rays (packets and single rays) on one thread.
+//! `cargo run --release --example instprof -- data/forest.toml [packet|single|diffuse] [repeats]`
+use std::time::Instant;
+
+use strahl::{BuildConfig, Coherence, HitStream, Query, SceneFile, raygen};
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let args: Vec<String> = std::env::args().collect();
+    let file = SceneFile::read(args.get(1).map(String::as_str).unwrap_or("data/forest.toml"))?;
+    let mode = args.get(2).cloned().unwrap_or_else(|| "packet".into());
+    let repeats: usize = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(5);
+    let scene = file.build(&BuildConfig::default())?;
+    let cam = file.camera.ok_or("no camera")?.camera();
+    let (primary, _) = raygen::primary(&cam, 1024, 1024);
+    let mut hits = HitStream::default();
+    scene.intersect_stream(&primary, &mut hits, Coherence::Coherent);
+    let diag = scene.bounds().map(|(lo, hi)| (hi - lo).length()).unwrap_or(1.0);
+    let (diffuse, _) = raygen::diffuse(&primary, &hits, 1, 1e-4 * diag);
+    let (rays, coherence) = match mode.as_str() {
+        "single" => (&primary, Coherence::Incoherent),
+        "diffuse" => (&diffuse, Coherence::Incoherent),
+        _ => (&primary, Coherence::Coherent),
+    };
+    let flat = if args.iter().any(|a| a == "flat") { Some(scene.flatten(&BuildConfig::default())?) } else { None };
+    let mut best = f64::INFINITY;
+    for _ in 0..repeats {
+        let t = Instant::now();
+        match &flat {
+            Some(f) => f.intersect_stream(rays, &mut hits, coherence),
+            None => scene.intersect_stream(rays, &mut hits, coherence),
+        }
+        best = best.min(t.elapsed().as_secs_f64());
+    }
+    println!("{mode}: {:.2} Mrays/s (1 thread, best of {repeats})", rays.len() as f64 / best / 1e6);
+    Ok(())
+}
