@@ -53,6 +53,9 @@ struct Placed {
     object: u32,
     /// Index in the list the scene was built from (the hit's `inst_id`).
     id: u32,
+    /// World box, for the per-lane test of packets.
+    lo: [f32; 3],
+    hi: [f32; 3],
 }
 
 /// Figures of a two-level build.
@@ -155,6 +158,7 @@ impl InstancedScene {
             .iter()
             .map(|p| {
                 let id = p.id();
+                let b = p.bounds();
                 let inst = &instances[id as usize];
                 let to_object = inst.transform.inverse();
                 Placed {
@@ -162,6 +166,8 @@ impl InstancedScene {
                     normal_to_world: to_object.matrix3.transpose() * inst.transform.matrix3.determinant(),
                     object: inst.object as u32,
                     id,
+                    lo: b.lo.to_array(),
+                    hi: b.hi.to_array(),
                 }
             })
             .collect();
@@ -295,9 +301,10 @@ impl InstancedScene {
                 let (start, count) = leaf_blocks(leaf);
                 for k in start..start + count {
                     let pl = &self.placed[k];
-                    let active = pb.tnear.simd_le(*tfar).to_bitmask() & pb.live;
+                    // Only the lanes that enter this instance's box go into the object.
+                    let active = pb.lanes_in_box::<CONS>(pl.lo, pl.hi, *tfar) & pb.live;
                     if active == 0 {
-                        break;
+                        continue;
                     }
                     let q = object_packet(&pl.to_object, &pb, *tfar, p, active);
                     let r = self.objects[pl.object as usize].bvh().trace_packet::<ANY>(&q);

@@ -396,9 +396,10 @@ fn instancing_markdown(s: &mut String, r: &Report) {
             .iter()
             .map(|c| match c.flat_agreement.as_ref().and_then(|f| f.as_ref()) {
                 Some(f) => format!(
-                    "{} {}, {:.0} / {:.0} / {:.0}",
+                    "{} {} (same triangle {}), {:.0} / {:.0} / {:.0}",
                     c.class,
                     pct(f.hit_miss_agreement),
+                    pct(f.same_triangle),
                     f.t_ulps_median,
                     f.t_ulps_p999,
                     f.t_ulps_max
@@ -421,17 +422,21 @@ fn instancing_markdown(s: &mut String, r: &Report) {
     }
     if !r.instancing_translations.is_empty() {
         let _ = writeln!(s, "\nInstanced against flattened, the world moved by a translation:\n");
-        let _ = writeln!(s, "| translation | class | rays | hit/miss agree | t ulps median | t ulps p99.9 | t ulps max |");
-        let _ = writeln!(s, "|---:|---|---:|---:|---:|---:|---:|");
+        let _ = writeln!(
+            s,
+            "| translation | class | rays | hit/miss agree | same triangle | t ulps median | t ulps p99.9 | t ulps max |"
+        );
+        let _ = writeln!(s, "|---:|---|---:|---:|---:|---:|---:|---:|");
         for t in &r.instancing_translations {
             let f = &t.agreement;
             let _ = writeln!(
                 s,
-                "| {:.0e} | {} | {} | {} | {:.1} | {:.1} | {:.0} |",
+                "| {:.0e} | {} | {} | {} | {} | {:.1} | {:.1} | {:.0} |",
                 t.translation,
                 t.class,
                 f.rays,
                 pct(f.hit_miss_agreement),
+                pct(f.same_triangle),
                 f.t_ulps_median,
                 f.t_ulps_p999,
                 f.t_ulps_max

@@ -241,11 +241,20 @@ struct Frustum {
     rmin: [f32x8; 3],
     rmax: [f32x8; 3],
     tnear: f32x8,
+    /// How far apart the rays get per unit of `t`: the largest spread of any direction component.
+    spread: f32x8,
 }
+
+/// Inner nodes reached below a node smaller than the packet's footprint carry this bit on the
+/// stack and are tested per lane: the frustum bounds the packet as a whole, so once boxes are
+/// smaller than the gaps between its rays it accepts most of them while few rays enter each.
+/// Measured on 10,000 instances seen from 900 units, a frustum-only walk visited 196 million
+/// nodes where per-lane tests visited 5 million.
+const LANE_MODE: u32 = 1 << 30;
 
 impl Frustum {
     /// `None` unless the live lanes share one origin and one direction octant (camera packets).
-    fn new(o: &[Pf; 3], rdir: &[Pf; 3], tnear: Pf, live: u32) -> Option<Self> {
+    fn new(o: &[Pf; 3], d: &[Pf; 3], rdir: &[Pf; 3], tnear: Pf, live: u32) -> Option<Self> {
         let zero = Pf::splat(0.0);
         let inf = Pf::splat(f32::INFINITY);
         let live_mask =
@@ -257,9 +266,14 @@ impl Frustum {
             rmin: [f32x8::splat(0.0); 3],
             rmax: [f32x8::splat(0.0); 3],
             tnear: f32x8::splat(hmin(live_mask.select(tnear, inf))),
+            spread: f32x8::splat(0.0),
         };
         let first = live.trailing_zeros() as usize;
+        let mut spread = 0.0f32;
         for a in 0..3 {
+            let dmin = hmin(live_mask.select(d[a], inf));
+            let dmax = -hmin(live_mask.select(-d[a], inf));
+            spread = spread.max(dmax - dmin);
             let neg = rdir[a].simd_lt(zero).to_bitmask() & live;
             if neg != 0 && neg != live {
                 return None;
@@ -281,6 +295,7 @@ impl Frustum {
             f.rmin[a] = f32x8::splat(rmin);
             f.rmax[a] = f32x8::splat(rmax);
         }
+        f.spread = f32x8::splat(spread * FOOTPRINT_FACTOR);
         Some(f)
     }
 
@@ -302,7 +317,20 @@ impl Frustum {
         let slack = (tn.abs() + tf.abs()) * f32x8::splat(WIDEN);
         (tn.simd_le(tf + slack).to_bitmask(), tn.to_array())
     }
+
+    /// The children whose largest extent is below the packet's footprint at their entry
+    /// distance `d`.
+    #[inline(always)]
+    fn small(&self, b: &[[f32; WIDTH]; 6], d: &[f32; WIDTH]) -> u32 {
+        let ext = |a: usize| f32x8::new(b[2 * a + 1]) - f32x8::new(b[2 * a]);
+        let e = ext(0).fast_max(ext(1)).fast_max(ext(2));
+        e.simd_lt(f32x8::new(*d).abs() * self.spread).to_bitmask()
+    }
 }
+
+/// Footprint scale: a node counts as small when its extent is below this many times the rays'
+/// spread at its distance (tuned by measurement, see PERFORMANCE.md).
+const FOOTPRINT_FACTOR: f32 = 4.0;
 
 impl Bvh {
     /// Turns a leaf hit into the public hit record. Inlined: called once per hit lane, and as a call
@@ -591,8 +619,27 @@ impl PacketBoxes {
             }
         }
         let tnear = Pf::new(tn_a);
-        let frustum = Frustum::new(&o, &rdir, tnear, live);
+        let frustum = Frustum::new(&o, &d, &rdir, tnear, live);
         Some((Self { o, d, rdir, od, pad, widen: Pf::splat(1.0 + WIDEN), tnear, live, frustum }, Pf::new(tf_a)))
+    }
+}
+
+impl PacketBoxes {
+    /// The lanes that enter the box `lo..hi` before their `tfar` (the per-lane slab test, with the
+    /// conservative widening if `CONS`).
+    #[inline(always)]
+    pub fn lanes_in_box<const CONS: bool>(&self, lo: [f32; 3], hi: [f32; 3], tfar: Pf) -> u32 {
+        let slab = |a: usize| {
+            let t0 = Pf::splat(lo[a]).mul_sub(self.rdir[a], self.od[a]);
+            let t1 = Pf::splat(hi[a]).mul_sub(self.rdir[a], self.od[a]);
+            (t0.fast_min(t1), t0.fast_max(t1))
+        };
+        let (nx, fx) = slab(0);
+        let (ny, fy) = slab(1);
+        let (nz, fz) = slab(2);
+        let tn = nx.fast_max(ny).fast_max(nz.fast_max(self.tnear));
+        let tf = fx.fast_min(fy).fast_min(fz.fast_min(tfar));
+        if CONS { tn.simd_le(tf.mul_add(self.widen, self.pad)) } else { tn.simd_le(tf) }.to_bitmask()
     }
 }
 
@@ -621,14 +668,36 @@ pub(crate) fn walk_packet<const ANY: bool, const CONS: bool>(
                 tfar_max = hmax(*tfar);
                 continue 'pop;
             }
-            let node = &nodes[cur as usize];
+            let lane_mode = cur & LANE_MODE != 0;
+            let node = &nodes[(cur & !LANE_MODE) as usize];
             let b = &node.bounds;
-            if let Some(f) = &pb.frustum {
-                let (mask, d) = f.test::<CONS>(b, tfar_max);
+            if let (Some(f), false) = (&pb.frustum, lane_mode) {
+                let (mut mask, d) = f.test::<CONS>(b, tfar_max);
+                // The frustum bounds the packet by intervals, which far away accept boxes between
+                // the rays; a leaf no ray enters is dropped here, before its costly test.
+                let mut leaves = mask;
+                while leaves != 0 {
+                    let i = leaves.trailing_zeros() as usize;
+                    leaves &= leaves - 1;
+                    if is_leaf(node.child[i])
+                        && pb.lanes_in_box::<CONS>([b[0][i], b[2][i], b[4][i]], [b[1][i], b[3][i], b[5][i]], *tfar) == 0
+                    {
+                        mask &= !(1 << i);
+                    }
+                }
                 if mask == 0 {
                     continue 'pop;
                 }
-                match order_children::<ANY>(stack, &node.child, mask, &d) {
+                let mut child = node.child;
+                let mut small = f.small(b, &d) & mask;
+                while small != 0 {
+                    let i = small.trailing_zeros() as usize;
+                    small &= small - 1;
+                    if !is_leaf(child[i]) {
+                        child[i] |= LANE_MODE;
+                    }
+                }
+                match order_children::<ANY>(stack, &child, mask, &d) {
                     Some(next) => cur = next,
                     None => continue 'pop,
                 }
@@ -654,7 +723,7 @@ pub(crate) fn walk_packet<const ANY: bool, const CONS: bool>(
                 let tf = fx.fast_min(fy).fast_min(fz.fast_min(*tfar));
                 let m = if CONS { tn.simd_le(tf.mul_add(pb.widen, pb.pad)) } else { tn.simd_le(tf) };
                 if m.to_bitmask() != 0 {
-                    hit_child[n] = c;
+                    hit_child[n] = if is_leaf(c) { c } else { c | LANE_MODE };
                     hit_dist[n] = hmin(m.select(tn, inf));
                     n += 1;
                 }
