@@ -18,10 +18,29 @@ fn check(spec: &scenes::SceneSpec, width: u32) {
         let what = format!("{} {}", r.name, c.class.name());
         assert!(c.rays > 0, "{what}: no rays");
         assert!(a.hit_miss_agreement >= 0.9999, "{what}: hit/miss agreement {}", a.hit_miss_agreement);
-        assert!(a.prim_agreement >= 0.999, "{what}: primitive agreement {}", a.prim_agreement);
-        assert!(a.t_rel_max < 1e-4, "{what}: t differs by {} relative", a.t_rel_max);
+        // Far instances have sub-pixel triangles; each engine's own rounding of the transformed
+        // ray then picks either triangle of a shared edge more often (all decided as ties below).
+        let prim = if r.instanced.is_some() { 0.99 } else { 0.999 };
+        assert!(a.prim_agreement >= prim, "{what}: primitive agreement {}", a.prim_agreement);
+        // In instanced scenes each engine rounds its own transform of the ray: an absolute error of
+        // a few ulps of the world coordinates, large relative to the tiny t of a secondary ray
+        // that meets a neighbouring surface just after leaving its own.
+        // The largest relative difference is then unbounded (t → 0), so only the 99.9th percentile
+        // is held there.
+        if r.instanced.is_some() {
+            assert!(a.t_rel_p999 < 1e-2, "{what}: t differs by {} relative at p99.9", a.t_rel_p999);
+        } else {
+            assert!(a.t_rel_max < 1e-4, "{what}: t differs by {} relative", a.t_rel_max);
+        }
         assert_eq!(a.classified.strahl_error, 0, "{what}: strahl errors {:?}", a.worst);
         assert!(c.strahl_apis_consistent >= 0.9999, "{what}: strahl APIs disagree");
+    }
+    if let Some(i) = &r.instanced {
+        assert!(i.memory_bytes as u64 * 10 < i.flattened_memory_bytes, "{}: instancing saves no memory", r.name);
+        for c in r.classes.iter().filter(|_| i.flattened_measured) {
+            let f = c.flat_agreement.as_ref().expect("flattened build compared");
+            assert!(f.hit_miss_agreement >= 0.9999, "{} {}: instanced vs flattened {f:?}", r.name, c.class.name());
+        }
     }
     // The scene is in view: a fair share of primary rays hit.
     assert!(r.classes[0].hit_rate > 0.1, "{}: primary hit rate {}", r.name, r.classes[0].hit_rate);
