@@ -20,7 +20,12 @@ use glam::{Affine3A, Mat3A, Vec3, Vec3A};
 
 use crate::bvh::build::{self, Aabb, BuildNode, PrimRef};
 use crate::bvh::node::{EMPTY, MAX_BLOCK_INDEX, Node, leaf_blocks, leaf_ref};
-use crate::bvh::traverse::{BoxRay, LeafHit, PacketBoxes, walk_packet, walk1, with_top_stack};
+use crate::bvh::traverse::{BoxRay, LeafHit, PacketBoxes, Stack, dispatch, walk_packet, walk1, with_stack};
+use crate::geometry::TriangleTest;
+use crate::geometry::badouel::Badouel;
+use crate::geometry::moeller::Moller;
+use crate::geometry::triangle::Kernel;
+use crate::geometry::watertight::Watertight;
 use crate::bvh::{BoxTest, BuildConfig};
 use crate::error::{Error, Result};
 use crate::ray::{Hit, PACKET_WIDTH, Ray, RayPacket};
@@ -86,6 +91,8 @@ pub struct InstancedScene {
     root: u32,
     placed: Vec<Placed>,
     bounds: Option<(Vec3, Vec3)>,
+    /// The tests every object was built for.
+    test: TriangleTest,
     box_test: BoxTest,
     stats: InstancedStats,
 }
@@ -109,21 +116,26 @@ impl InstancedScene {
         let start = Instant::now();
         let objects = objects.into_iter().map(|meshes| Scene::build(meshes, config)).collect::<Result<Vec<Scene>>>()?;
         let objects_build_ms = start.elapsed().as_secs_f64() * 1e3;
-        Self::from_objects(objects, instances, config.box_test, objects_build_ms)
+        Self::from_objects(objects, instances, (config.triangle_test, config.box_test), objects_build_ms)
     }
 
-    /// Places already built objects; see [`build`](Self::build).
-    pub fn from_scenes(objects: Vec<Scene>, instances: Vec<Instance>, box_test: BoxTest) -> Result<Self> {
-        Self::from_objects(objects, instances, box_test, 0.0)
+    /// Places already built objects; see [`build`](Self::build). The objects must share their
+    /// triangle and box tests ([`Error::MixedTests`] otherwise); an empty list takes the defaults.
+    pub fn from_scenes(objects: Vec<Scene>, instances: Vec<Instance>) -> Result<Self> {
+        let tests = objects.first().map_or((TriangleTest::default(), BoxTest::default()), |o| o.tests());
+        Self::from_objects(objects, instances, tests, 0.0)
     }
 
     fn from_objects(
         objects: Vec<Scene>,
         instances: Vec<Instance>,
-        box_test: BoxTest,
+        (test, box_test): (TriangleTest, BoxTest),
         objects_build_ms: f64,
     ) -> Result<Self> {
         let start = Instant::now();
+        if objects.iter().any(|o| o.tests() != (test, box_test)) {
+            return Err(Error::MixedTests);
+        }
         if instances.len() > MAX_BLOCK_INDEX {
             return Err(Error::TooManyGeometries(instances.len()));
         }
@@ -192,7 +204,7 @@ impl InstancedScene {
             bytes,
             flattened_bytes,
         };
-        Ok(Self { objects, instances, nodes, root, placed, bounds, box_test, stats })
+        Ok(Self { objects, instances, nodes, root, placed, bounds, test, box_test, stats })
     }
 
     pub fn objects(&self) -> &[Scene] {
@@ -251,44 +263,65 @@ impl InstancedScene {
         if !ray.is_valid() || self.root == EMPTY {
             return None;
         }
-        match self.box_test {
-            BoxTest::Conservative => self.trace1_with::<ANY, true>(ray),
-            BoxTest::Fast => self.trace1_with::<ANY, false>(ray),
-        }
+        with_stack(|stack| {
+            macro_rules! go {
+                ($k:ty, $c:expr) => {
+                    self.trace1_with::<ANY, $k, $c>(ray, stack)
+                };
+            }
+            dispatch!(self.test, self.box_test, go)
+        })
     }
 
-    fn trace1_with<const ANY: bool, const CONS: bool>(&self, ray: &Ray) -> Option<(u32, LeafHit)> {
+    /// The instance level's walk; at each instance the object's walk continues on the same stack
+    /// with the same kernel, so entering an instance costs one transform and no dispatch.
+    fn trace1_with<const ANY: bool, K: Kernel, const CONS: bool>(
+        &self,
+        ray: &Ray,
+        stack: &mut Stack,
+    ) -> Option<(u32, LeafHit)> {
         let br = BoxRay::new(ray);
         let mut tfar = ray.tfar;
         let mut best = None;
-        with_top_stack(self.root, |stack| {
-            walk1::<ANY, CONS>(&self.nodes, &br, stack, &mut tfar, |leaf, tfar| {
-                let (start, count) = leaf_blocks(leaf);
-                for k in start..start + count {
-                    let p = &self.placed[k];
-                    let r = object_ray(&p.to_object, ray, *tfar);
-                    if let Some(h) = self.objects[p.object as usize].bvh().trace1::<ANY>(&r) {
-                        *tfar = h.t;
-                        best = Some((k as u32, h));
-                        if ANY {
-                            return true;
-                        }
+        let base = stack.push_root(self.root);
+        walk1::<ANY, CONS>(&self.nodes, &br, stack, base, &mut tfar, |leaf, tfar, stack| {
+            let (start, count) = leaf_blocks(leaf);
+            for k in start..start + count {
+                let p = &self.placed[k];
+                let r = object_ray(&p.to_object, ray, *tfar);
+                // Finite in, finite out, except where a huge scale overflows: such rays miss.
+                if !(r.origin.is_finite() && r.dir.is_finite()) {
+                    continue;
+                }
+                if let Some(h) = self.objects[p.object as usize].bvh().trace1_with::<ANY, K, CONS>(&r, stack) {
+                    *tfar = h.t;
+                    best = Some((k as u32, h));
+                    if ANY {
+                        return true;
                     }
                 }
-                false
-            })
+            }
+            false
         });
         best
     }
 
     fn trace_packet<const ANY: bool>(&self, p: &RayPacket) -> PacketHits {
-        match self.box_test {
-            BoxTest::Conservative => self.trace_packet_with::<ANY, true>(p),
-            BoxTest::Fast => self.trace_packet_with::<ANY, false>(p),
-        }
+        with_stack(|stack| {
+            macro_rules! go {
+                ($k:ty, $c:expr) => {
+                    self.trace_packet_with::<ANY, $k, $c>(p, stack)
+                };
+            }
+            dispatch!(self.test, self.box_test, go)
+        })
     }
 
-    fn trace_packet_with<const ANY: bool, const CONS: bool>(&self, p: &RayPacket) -> PacketHits {
+    fn trace_packet_with<const ANY: bool, K: Kernel, const CONS: bool>(
+        &self,
+        p: &RayPacket,
+        stack: &mut Stack,
+    ) -> PacketHits {
         let mut out = PacketHits { mask: 0, placed: [0; PACKET_WIDTH], hit: [None; PACKET_WIDTH] };
         if self.root == EMPTY {
             return out;
@@ -296,43 +329,42 @@ impl InstancedScene {
         let Some((pb, mut tfar)) = PacketBoxes::new(p) else {
             return out;
         };
-        with_top_stack(self.root, |stack| {
-            walk_packet::<ANY, CONS>(&self.nodes, &pb, stack, &mut tfar, |leaf, tfar| {
-                let (start, count) = leaf_blocks(leaf);
-                for k in start..start + count {
-                    let pl = &self.placed[k];
-                    // Only the lanes that enter this instance's box go into the object.
-                    let active = pb.lanes_in_box::<CONS>(pl.lo, pl.hi, *tfar) & pb.live;
-                    if active == 0 {
-                        continue;
-                    }
-                    let q = object_packet(&pl.to_object, &pb, *tfar, p, active);
-                    let r = self.objects[pl.object as usize].bvh().trace_packet::<ANY>(&q);
-                    if r.mask == 0 {
-                        continue;
-                    }
-                    let mut t = tfar.to_array();
-                    let mut bits = r.mask;
-                    while bits != 0 {
-                        let l = bits.trailing_zeros() as usize;
-                        bits &= bits - 1;
-                        if ANY {
-                            t[l] = f32::NEG_INFINITY;
-                        } else {
-                            t[l] = r.t[l];
-                            out.placed[l] = k as u32;
-                            out.hit[l] =
-                                Some(LeafHit { block: r.block[l], lane: r.lane[l], t: r.t[l], u: r.u[l], v: r.v[l] });
-                        }
-                    }
-                    out.mask |= r.mask;
-                    *tfar = Pf::new(t);
-                    if ANY && out.mask == pb.live {
-                        return true;
+        let base = stack.push_root(self.root);
+        walk_packet::<ANY, CONS>(&self.nodes, &pb, stack, base, &mut tfar, |leaf, tfar, stack| {
+            let (start, count) = leaf_blocks(leaf);
+            for k in start..start + count {
+                let pl = &self.placed[k];
+                // Only the lanes that enter this instance's box go into the object.
+                let active = pb.lanes_in_box::<CONS>(pl.lo, pl.hi, *tfar) & pb.live;
+                if active == 0 {
+                    continue;
+                }
+                let q = object_packet(&pl.to_object, &pb, *tfar, p, active);
+                let r = self.objects[pl.object as usize].bvh().trace_packet_with::<ANY, K, CONS>(&q, stack);
+                if r.mask == 0 {
+                    continue;
+                }
+                let mut t = tfar.to_array();
+                let mut bits = r.mask;
+                while bits != 0 {
+                    let l = bits.trailing_zeros() as usize;
+                    bits &= bits - 1;
+                    if ANY {
+                        t[l] = f32::NEG_INFINITY;
+                    } else {
+                        t[l] = r.t[l];
+                        out.placed[l] = k as u32;
+                        out.hit[l] =
+                            Some(LeafHit { block: r.block[l], lane: r.lane[l], t: r.t[l], u: r.u[l], v: r.v[l] });
                     }
                 }
-                false
-            })
+                out.mask |= r.mask;
+                *tfar = Pf::new(t);
+                if ANY && out.mask == pb.live {
+                    return true;
+                }
+            }
+            false
         });
         out
     }

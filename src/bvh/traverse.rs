@@ -61,7 +61,8 @@ const WIDEN: f32 = 1.0 / (1u32 << 20) as f32;
 
 /// Stack entries: at most `WIDTH − 1` pushes per wide level; SAH levels are capped at
 /// `MEDIAN_DEPTH` and median levels below halve the set (at most 32 binary, so 32 wide levels).
-const STACK: usize = (MEDIAN_DEPTH + 33) * (WIDTH - 1) + 1;
+/// Twice that: an instance level and an object level share one stack.
+const STACK: usize = 2 * ((MEDIAN_DEPTH + 33) * (WIDTH - 1) + 1);
 
 #[inline(always)]
 fn safe_rcp(d: f32) -> f32 {
@@ -115,11 +116,12 @@ pub(crate) struct Stack {
 impl Stack {
     const EMPTY: Stack = Stack { node: [0; STACK], dist: [0.0; STACK], len: 0 };
 
+    /// Pushes `root` and returns the length to walk back down to.
     #[inline(always)]
-    fn reset(&mut self, root: u32) {
-        self.node[0] = root;
-        self.dist[0] = f32::NEG_INFINITY;
-        self.len = 1;
+    pub(crate) fn push_root(&mut self, root: u32) -> usize {
+        let base = self.len;
+        self.push(root, f32::NEG_INFINITY);
+        base
     }
 
     #[inline(always)]
@@ -132,6 +134,16 @@ impl Stack {
     #[inline(always)]
     fn pop(&mut self) -> Option<(u32, f32)> {
         self.len = self.len.checked_sub(1)?;
+        Some((self.node[self.len], self.dist[self.len]))
+    }
+
+    /// Pops an entry above `base`, the level a walk started at.
+    #[inline(always)]
+    fn pop_above(&mut self, base: usize) -> Option<(u32, f32)> {
+        if self.len <= base {
+            return None;
+        }
+        self.len -= 1;
         Some((self.node[self.len], self.dist[self.len]))
     }
 
@@ -154,41 +166,37 @@ impl Stack {
 
 thread_local! {
     static STACK_TLS: RefCell<Stack> = const { RefCell::new(Stack::EMPTY) };
-    /// The instance level has its own, so that its leaves may walk the objects' BVHs.
-    static TOP_STACK: RefCell<Stack> = const { RefCell::new(Stack::EMPTY) };
 }
 
-/// Runs `f` with this thread's traversal stack, reset to hold `root` (a fresh one if the thread's
-/// stack is already in use, which only re-entrant use could cause).
+/// Runs `f` with this thread's traversal stack, emptied (a fresh one if the thread's stack is
+/// already in use, which only re-entrant use could cause). An instance level and the objects below
+/// it share the one stack: each walk pushes its root and pops back to where it started.
 #[inline(always)]
-fn with_stack<R>(root: u32, f: impl FnOnce(&mut Stack) -> R) -> R {
-    with_stack_in(&STACK_TLS, root, f)
-}
-
-/// [`with_stack`] for the instance level.
-#[inline(always)]
-pub(crate) fn with_top_stack<R>(root: u32, f: impl FnOnce(&mut Stack) -> R) -> R {
-    with_stack_in(&TOP_STACK, root, f)
-}
-
-#[inline(always)]
-fn with_stack_in<R>(
-    key: &'static std::thread::LocalKey<RefCell<Stack>>,
-    root: u32,
-    f: impl FnOnce(&mut Stack) -> R,
-) -> R {
-    key.with(|cell| match cell.try_borrow_mut() {
+pub(crate) fn with_stack<R>(f: impl FnOnce(&mut Stack) -> R) -> R {
+    STACK_TLS.with(|cell| match cell.try_borrow_mut() {
         Ok(mut s) => {
-            s.reset(root);
+            s.len = 0;
             f(&mut s)
         }
-        Err(_) => {
-            let mut s = Box::new(Stack::EMPTY);
-            s.reset(root);
-            f(&mut s)
-        }
+        Err(_) => f(&mut Box::new(Stack::EMPTY)),
     })
 }
+
+/// Calls `$go!(Kernel, CONS)` with the kernel type and box-test flag of a `(TriangleTest,
+/// BoxTest)` pair: the one place the six monomorphized kernels are chosen.
+macro_rules! dispatch {
+    ($test:expr, $boxes:expr, $go:ident) => {
+        match ($test, $boxes) {
+            (TriangleTest::MollerTrumbore, BoxTest::Conservative) => $go!(Moller, true),
+            (TriangleTest::MollerTrumbore, BoxTest::Fast) => $go!(Moller, false),
+            (TriangleTest::Badouel, BoxTest::Conservative) => $go!(Badouel, true),
+            (TriangleTest::Badouel, BoxTest::Fast) => $go!(Badouel, false),
+            (TriangleTest::Watertight, BoxTest::Conservative) => $go!(Watertight, true),
+            (TriangleTest::Watertight, BoxTest::Fast) => $go!(Watertight, false),
+        }
+    };
+}
+pub(crate) use dispatch;
 
 /// Descends into the nearest of the children in `mask` (distances `d`) and pushes the others,
 /// nearest on top (in any order for any-hit queries). Returns the child to visit next.
@@ -381,28 +389,34 @@ impl Bvh {
         if !ray.is_valid() || self.root == EMPTY {
             return None;
         }
-        with_stack(self.root, |stack| match (self.test, self.box_test) {
-            (TriangleTest::MollerTrumbore, BoxTest::Conservative) => self.trace1_with::<ANY, Moller, true>(ray, stack),
-            (TriangleTest::MollerTrumbore, BoxTest::Fast) => self.trace1_with::<ANY, Moller, false>(ray, stack),
-            (TriangleTest::Badouel, BoxTest::Conservative) => self.trace1_with::<ANY, Badouel, true>(ray, stack),
-            (TriangleTest::Badouel, BoxTest::Fast) => self.trace1_with::<ANY, Badouel, false>(ray, stack),
-            (TriangleTest::Watertight, BoxTest::Conservative) => self.trace1_with::<ANY, Watertight, true>(ray, stack),
-            (TriangleTest::Watertight, BoxTest::Fast) => self.trace1_with::<ANY, Watertight, false>(ray, stack),
+        with_stack(|stack| {
+            macro_rules! go {
+                ($k:ty, $c:expr) => {
+                    self.trace1_with::<ANY, $k, $c>(ray, stack)
+                };
+            }
+            dispatch!(self.test, self.box_test, go)
         })
     }
 
+    /// [`trace1`](Self::trace1) with a chosen kernel, on `stack` above its current entries; the
+    /// ray must be valid.
     #[inline(never)]
-    fn trace1_with<const ANY: bool, K: Kernel, const CONS: bool>(
+    pub(crate) fn trace1_with<const ANY: bool, K: Kernel, const CONS: bool>(
         &self,
         ray: &Ray,
         stack: &mut Stack,
     ) -> Option<LeafHit> {
+        if self.root == EMPTY {
+            return None;
+        }
+        let base = stack.push_root(self.root);
         let r4 = Ray4::new(ray.origin, ray.dir);
         let pre = K::pre(&r4);
         let br = BoxRay::new(ray);
         let mut tfar = ray.tfar;
         let mut best = None;
-        walk1::<ANY, CONS>(&self.nodes, &br, stack, &mut tfar, |leaf, tfar| {
+        walk1::<ANY, CONS>(&self.nodes, &br, stack, base, &mut tfar, |leaf, tfar, _| {
             let (start, count) = leaf_blocks(leaf);
             for bi in start..start + count {
                 if let Some((lane, t, u, v)) = K::intersect1(&self.blocks[bi], &r4, &pre, ray.tnear, *tfar) {
@@ -421,22 +435,20 @@ impl Bvh {
     /// Closest hits (`ANY = false`) or occlusion (`ANY = true`) of the active lanes of a packet.
     /// Invalid rays in active lanes are answered with a miss.
     pub fn trace_packet<const ANY: bool>(&self, p: &RayPacket) -> PacketHits {
-        with_stack(self.root, |stack| match (self.test, self.box_test) {
-            (TriangleTest::MollerTrumbore, BoxTest::Conservative) => {
-                self.trace_packet_with::<ANY, Moller, true>(p, stack)
+        with_stack(|stack| {
+            macro_rules! go {
+                ($k:ty, $c:expr) => {
+                    self.trace_packet_with::<ANY, $k, $c>(p, stack)
+                };
             }
-            (TriangleTest::MollerTrumbore, BoxTest::Fast) => self.trace_packet_with::<ANY, Moller, false>(p, stack),
-            (TriangleTest::Badouel, BoxTest::Conservative) => self.trace_packet_with::<ANY, Badouel, true>(p, stack),
-            (TriangleTest::Badouel, BoxTest::Fast) => self.trace_packet_with::<ANY, Badouel, false>(p, stack),
-            (TriangleTest::Watertight, BoxTest::Conservative) => {
-                self.trace_packet_with::<ANY, Watertight, true>(p, stack)
-            }
-            (TriangleTest::Watertight, BoxTest::Fast) => self.trace_packet_with::<ANY, Watertight, false>(p, stack),
+            dispatch!(self.test, self.box_test, go)
         })
     }
 
+    /// [`trace_packet`](Self::trace_packet) with a chosen kernel, on `stack` above its current
+    /// entries.
     #[inline(never)]
-    fn trace_packet_with<const ANY: bool, K: Kernel, const CONS: bool>(
+    pub(crate) fn trace_packet_with<const ANY: bool, K: Kernel, const CONS: bool>(
         &self,
         p: &RayPacket,
         stack: &mut Stack,
@@ -448,8 +460,9 @@ impl Bvh {
         let Some((pb, mut tfar)) = PacketBoxes::new(p) else {
             return out;
         };
+        let base = stack.push_root(self.root);
         let rk = RayK { o: pb.o, d: pb.d, tnear: pb.tnear };
-        walk_packet::<ANY, CONS>(&self.nodes, &pb, stack, &mut tfar, |leaf, tfar| {
+        walk_packet::<ANY, CONS>(&self.nodes, &pb, stack, base, &mut tfar, |leaf, tfar, _| {
             let (start, count) = leaf_blocks(leaf);
             let active = pb.tnear.simd_le(*tfar);
             for bi in start..start + count {
@@ -544,17 +557,19 @@ pub(crate) fn walk1<const ANY: bool, const CONS: bool>(
     nodes: &[Node],
     br: &BoxRay,
     stack: &mut Stack,
+    base: usize,
     tfar: &mut f32,
-    mut leaf: impl FnMut(u32, &mut f32) -> bool,
+    mut leaf: impl FnMut(u32, &mut f32, &mut Stack) -> bool,
 ) {
-    'pop: while let Some((mut cur, dist)) = stack.pop() {
+    'pop: while let Some((mut cur, dist)) = stack.pop_above(base) {
         // Skip subtrees entered beyond the closest hit so far.
         if dist > *tfar {
             continue;
         }
         loop {
             if is_leaf(cur) {
-                if leaf(cur, tfar) {
+                if leaf(cur, tfar, stack) {
+                    stack.len = base;
                     return;
                 }
                 continue 'pop;
@@ -651,18 +666,20 @@ pub(crate) fn walk_packet<const ANY: bool, const CONS: bool>(
     nodes: &[Node],
     pb: &PacketBoxes,
     stack: &mut Stack,
+    base: usize,
     tfar: &mut Pf,
-    mut leaf: impl FnMut(u32, &mut Pf) -> bool,
+    mut leaf: impl FnMut(u32, &mut Pf, &mut Stack) -> bool,
 ) {
     let inf = Pf::splat(f32::INFINITY);
     let mut tfar_max = hmax(*tfar);
-    'pop: while let Some((mut cur, dist)) = stack.pop() {
+    'pop: while let Some((mut cur, dist)) = stack.pop_above(base) {
         if dist > tfar_max {
             continue;
         }
         loop {
             if is_leaf(cur) {
-                if leaf(cur, tfar) {
+                if leaf(cur, tfar, stack) {
+                    stack.len = base;
                     return;
                 }
                 tfar_max = hmax(*tfar);
@@ -742,7 +759,7 @@ pub(crate) fn walk_packet<const ANY: bool, const CONS: bool>(
             if !ANY {
                 stack.sort_from(base);
             }
-            let Some((next, _)) = stack.pop() else {
+            let Some((next, _)) = stack.pop_above(base) else {
                 continue 'pop;
             };
             cur = next;
