@@ -383,7 +383,8 @@ mod tests {
         let x = m.transform_vector3(Vec3::X);
         assert!((x - Vec3::new(2.0_f32.sqrt(), 0.0, -(2.0_f32.sqrt()))).length() < 1e-5, "{x}");
         // The lattice is centred on its origin.
-        let c: Vec3 = f.instances[1..].iter().map(|i| i.transform.translation.into()).fold(Vec3::ZERO, |a, b: Vec3| a + b);
+        let c: Vec3 =
+            f.instances[1..].iter().map(|i| i.transform.translation.into()).fold(Vec3::ZERO, |a, b: Vec3| a + b);
         assert!(c.length() < 1e-3, "{c}");
     }
 

@@ -8,7 +8,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 use serde::Serialize;
 use strahl::{
-    BuildConfig, Camera, Coherence, HitStream, InstancedScene, INVALID_ID, PACKET_WIDTH, Query, RayStream, Scene,
+    BuildConfig, Camera, Coherence, HitStream, INVALID_ID, InstancedScene, PACKET_WIDTH, Query, RayStream, Scene,
     raygen,
 };
 
@@ -102,7 +102,12 @@ impl AnswerSlice<'_> {
 
 impl Answers {
     pub fn misses(n: usize) -> Self {
-        Self { t: vec![f32::INFINITY; n], geom: vec![INVALID_ID; n], prim: vec![INVALID_ID; n], inst: vec![INVALID_ID; n] }
+        Self {
+            t: vec![f32::INFINITY; n],
+            geom: vec![INVALID_ID; n],
+            prim: vec![INVALID_ID; n],
+            inst: vec![INVALID_ID; n],
+        }
     }
 
     pub fn len(&self) -> usize {
@@ -375,10 +380,26 @@ pub fn run_scene(
     let ((eye, at), light) = spec.view_and_light(scene.bounds());
     let camera = Camera::look_at(eye, at, Vec3::Y, 60.0);
     let world = accuracy::Flat(&meshes);
-    let built =
-        Built { scene: &scene, escene: &escene, world: &world, bounds: scene.bounds(), flat: None, normal_offset: false, geom_offsets: Vec::new() };
+    let built = Built {
+        scene: &scene,
+        escene: &escene,
+        world: &world,
+        bounds: scene.bounds(),
+        flat: None,
+        normal_offset: false,
+        geom_offsets: Vec::new(),
+    };
     let (classes, ray_sets, image) = run_rays(&built, &camera, light, pool, settings, progress);
-    Ok(SceneResult { name: spec.name.clone(), triangles, build, classes, instanced: None, image, width: settings.width, ray_sets })
+    Ok(SceneResult {
+        name: spec.name.clone(),
+        triangles,
+        build,
+        classes,
+        instanced: None,
+        image,
+        width: settings.width,
+        ray_sets,
+    })
 }
 
 /// Runs one instanced scene (a scene file) through both engines, and through strahl flattened
@@ -463,8 +484,15 @@ fn run_instanced(
     };
     let light = file.lights.first().map_or(spec.view_and_light(bounds).1, |l| l.position);
     let world = accuracy::InstancedWorld::new(&objects, &file.instances);
-    let built =
-        Built { scene: &scene, escene: &escene, world: &world, bounds, flat: flat.as_ref(), normal_offset: true, geom_offsets: flat_geometry_offsets(&scene) };
+    let built = Built {
+        scene: &scene,
+        escene: &escene,
+        world: &world,
+        bounds,
+        flat: flat.as_ref(),
+        normal_offset: true,
+        geom_offsets: flat_geometry_offsets(&scene),
+    };
     let (classes, ray_sets, image) = run_rays(&built, &camera, light, pool, settings, progress);
     Ok(SceneResult {
         name: spec.name.clone(),
@@ -673,7 +701,10 @@ pub(crate) fn strahl_single<Q: Query>(scene: &Q, rays: &RayStream, class: Class,
     out.par_fill(|start, o| {
         for k in 0..o.len() {
             let r = rays.get(start + k);
-            o.set(k, if class.occlusion() { occlusion_answer(scene.occluded(&r)) } else { hit_answer(scene.intersect(&r)) });
+            o.set(
+                k,
+                if class.occlusion() { occlusion_answer(scene.occluded(&r)) } else { hit_answer(scene.intersect(&r)) },
+            );
         }
     });
 }

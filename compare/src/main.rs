@@ -146,11 +146,11 @@ fn main() -> anyhow::Result<()> {
 
     let mut rep = report::build_report(&results, args.threads, args.width, args.passes);
     // Instanced against flattened with the world moved out to 1e6, on the forest scene.
-    if let Some(spec) = specs.iter().find(|s| s.name == "forest") {
-        if let Some(file) = spec.scene_file()? {
-            eprintln!("instancing: instanced vs flattened at translations 1 to 1e6 ({})", file.path.display());
-            rep.instancing_translations = harness::translation_sweep(&file, &pool, args.width.min(512), settings.seed)?;
-        }
+    if let Some(spec) = specs.iter().find(|s| s.name == "forest")
+        && let Some(file) = spec.scene_file()?
+    {
+        eprintln!("instancing: instanced vs flattened at translations 1 to 1e6 ({})", file.path.display());
+        rep.instancing_translations = harness::translation_sweep(&file, &pool, args.width.min(512), settings.seed)?;
     }
     if args.accuracy {
         let scenes_rays: Vec<methods::SceneRays> = specs
