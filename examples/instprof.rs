@@ -1,5 +1,6 @@
 //! Profiling aid: traces a scene file's primary rays (packets and single rays) on one thread.
-//! `cargo run --release --example instprof -- data/forest.toml [packet|single|diffuse] [repeats]`
+//! `cargo run --release --example instprof -- data/forest.toml [packet|single|diffuse] [repeats] [flat]`
+//! `MAX_LEAF` and `TRAV_COST` override the build settings.
 use std::time::Instant;
 
 use strahl::{BuildConfig, Coherence, HitStream, Query, SceneFile, raygen};
@@ -9,7 +10,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let file = SceneFile::read(args.get(1).map(String::as_str).unwrap_or("data/forest.toml"))?;
     let mode = args.get(2).cloned().unwrap_or_else(|| "packet".into());
     let repeats: usize = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(5);
-    let scene = file.build(&BuildConfig::default())?;
+    let mut cfg = BuildConfig::default();
+    if let Some(v) = std::env::var("MAX_LEAF").ok().and_then(|v| v.parse().ok()) {
+        cfg.max_leaf = v;
+    }
+    if let Some(v) = std::env::var("TRAV_COST").ok().and_then(|v| v.parse().ok()) {
+        cfg.traversal_cost = v;
+    }
+    let scene = file.build(&cfg)?;
     let cam = file.camera.ok_or("no camera")?.camera();
     let (primary, _) = raygen::primary(&cam, 1024, 1024);
     let mut hits = HitStream::default();
