@@ -8,8 +8,8 @@ use glam::Vec3;
 use rayon::prelude::*;
 use serde::Serialize;
 use strahl::{
-    BuildConfig, Camera, Coherence, HitStream, INVALID_ID, InstancedScene, PACKET_WIDTH, Query, RayStream, Scene,
-    raygen,
+    BuildConfig, Camera, Coherence, HitPacket, HitStream, INVALID_ID, InstancedScene, PACKET_WIDTH, Query, RayStream,
+    Scene, raygen,
 };
 
 use crate::accuracy::{self, Accuracy};
@@ -711,6 +711,7 @@ pub(crate) fn strahl_single<Q: Query>(scene: &Q, rays: &RayStream, class: Class,
 
 pub(crate) fn strahl_packet<Q: Query>(scene: &Q, rays: &RayStream, class: Class, out: &mut Answers) {
     out.par_fill(|start, o| {
+        let mut hp = HitPacket::default();
         for k in (0..o.len()).step_by(PACKET_WIDTH) {
             let m = (o.len() - k).min(PACKET_WIDTH);
             let packet = rays.packet(start + k, m);
@@ -720,10 +721,11 @@ pub(crate) fn strahl_packet<Q: Query>(scene: &Q, rays: &RayStream, class: Class,
                     o.set(k + l, occlusion_answer(bits & (1 << l) != 0));
                 }
             } else {
-                for l in 0..m {
-                    o.set(k + l, MISS);
-                }
-                scene.intersect_packet_each(&packet, |l, h| o.set(k + l, hit_answer(Some(*h))));
+                scene.intersect_packet(&packet, &mut hp);
+                o.t[k..k + m].copy_from_slice(&hp.t[..m]);
+                o.geom[k..k + m].copy_from_slice(&hp.geom_id[..m]);
+                o.prim[k..k + m].copy_from_slice(&hp.prim_id[..m]);
+                o.inst[k..k + m].copy_from_slice(&hp.inst_id[..m]);
             }
         }
     });

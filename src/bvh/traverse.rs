@@ -26,7 +26,7 @@ use crate::geometry::badouel::Badouel;
 use crate::geometry::moeller::Moller;
 use crate::geometry::triangle::{BLOCK, Kernel, Ray4, RayK, TriangleTest};
 use crate::geometry::watertight::Watertight;
-use crate::ray::{Hit, PACKET_WIDTH, Ray, RayPacket};
+use crate::ray::{Hit, MIN_DIRECTION, PACKET_WIDTH, Ray, RayPacket};
 use crate::simd::*;
 
 /// The ray–box test used by traversal.
@@ -262,7 +262,7 @@ const LANE_MODE: u32 = 1 << 30;
 
 impl Frustum {
     /// `None` unless the live lanes share one origin and one direction octant (camera packets).
-    fn new(o: &[Pf; 3], d: &[Pf; 3], rdir: &[Pf; 3], tnear: Pf, live: u32) -> Option<Self> {
+    fn new(o: &[Pf; 3], rdir: &[Pf; 3], tnear: Pf, live: u32) -> Option<Self> {
         let zero = Pf::splat(0.0);
         let inf = Pf::splat(f32::INFINITY);
         let live_mask =
@@ -279,9 +279,6 @@ impl Frustum {
         let first = live.trailing_zeros() as usize;
         let mut spread = 0.0f32;
         for a in 0..3 {
-            let dmin = hmin(live_mask.select(d[a], inf));
-            let dmax = -hmin(live_mask.select(-d[a], inf));
-            spread = spread.max(dmax - dmin);
             let neg = rdir[a].simd_lt(zero).to_bitmask() & live;
             if neg != 0 && neg != live {
                 return None;
@@ -296,6 +293,8 @@ impl Frustum {
             }
             let rmin = hmin(live_mask.select(rdir[a], inf));
             let rmax = -hmin(live_mask.select(-rdir[a], inf));
+            // One octant: the directions span [1/rmax, 1/rmin] on this axis.
+            spread = spread.max((1.0 / rmin - 1.0 / rmax).abs());
             // Near plane: the box minimum for positive directions, mirrored for negative ones.
             f.near[a] = 2 * a + negative as usize;
             f.far[a] = 2 * a + 1 - negative as usize;
@@ -607,17 +606,24 @@ impl PacketBoxes {
     /// lane holds a valid ray.
     #[inline(always)]
     pub fn new(p: &RayPacket) -> Option<(Self, Pf)> {
-        let mut live = 0u32;
-        for lane in 0..PACKET_WIDTH {
-            if p.is_active(lane) && p.get(lane).is_valid() {
-                live |= 1 << lane;
-            }
-        }
+        let o = [Pf::new(p.ox), Pf::new(p.oy), Pf::new(p.oz)];
+        let d = [Pf::new(p.dx), Pf::new(p.dy), Pf::new(p.dz)];
+        // `Ray::is_valid` for all lanes at once: comparisons with NaN are false.
+        let inf = Pf::splat(f32::INFINITY);
+        let finite = |x: Pf| x.abs().simd_lt(inf);
+        let (ad, tn, tf) = ([d[0].abs(), d[1].abs(), d[2].abs()], Pf::new(p.tnear), Pf::new(p.tfar));
+        let valid = finite(o[0])
+            & finite(o[1])
+            & finite(o[2])
+            & finite(d[0])
+            & finite(d[1])
+            & finite(d[2])
+            & ad[0].fast_max(ad[1]).fast_max(ad[2]).simd_ge(Pf::splat(MIN_DIRECTION))
+            & tn.simd_le(tf);
+        let live = valid.to_bitmask() & p.active & ((1u64 << PACKET_WIDTH) - 1) as u32;
         if live == 0 {
             return None;
         }
-        let o = [Pf::new(p.ox), Pf::new(p.oy), Pf::new(p.oz)];
-        let d = [Pf::new(p.dx), Pf::new(p.dy), Pf::new(p.dz)];
         let rcp = |x: Pf| {
             let small = x.abs().simd_lt(Pf::splat(MIN_RCP_INPUT));
             Pf::splat(1.0) / small.select(Pf::splat(MIN_RCP_INPUT).copysign(x), x)
@@ -634,7 +640,7 @@ impl PacketBoxes {
             }
         }
         let tnear = Pf::new(tn_a);
-        let frustum = Frustum::new(&o, &d, &rdir, tnear, live);
+        let frustum = Frustum::new(&o, &rdir, tnear, live);
         Some((Self { o, d, rdir, od, pad, widen: Pf::splat(1.0 + WIDEN), tnear, live, frustum }, Pf::new(tf_a)))
     }
 }
@@ -690,21 +696,13 @@ pub(crate) fn walk_packet<const ANY: bool, const CONS: bool>(
             let b = &node.bounds;
             if let (Some(f), false) = (&pb.frustum, lane_mode) {
                 let (mut mask, d) = f.test::<CONS>(b, tfar_max);
-                // The frustum bounds the packet by intervals, which far away accept boxes between
-                // the rays; a leaf no ray enters is dropped here, before its costly test.
-                let mut leaves = mask;
-                while leaves != 0 {
-                    let i = leaves.trailing_zeros() as usize;
-                    leaves &= leaves - 1;
-                    if is_leaf(node.child[i])
-                        && pb.lanes_in_box::<CONS>([b[0][i], b[2][i], b[4][i]], [b[1][i], b[3][i], b[5][i]], *tfar) == 0
-                    {
-                        mask &= !(1 << i);
-                    }
-                }
                 if mask == 0 {
                     continue 'pop;
                 }
+                // Children smaller than the packet's footprint: the frustum accepts them although
+                // few rays may enter. A leaf no lane enters is dropped here, before its costly
+                // test; an inner node continues per lane. (Large children skip both: there the
+                // frustum is tight, and the extra test only cost time.)
                 let mut child = node.child;
                 let mut small = f.small(b, &d) & mask;
                 while small != 0 {
@@ -712,7 +710,14 @@ pub(crate) fn walk_packet<const ANY: bool, const CONS: bool>(
                     small &= small - 1;
                     if !is_leaf(child[i]) {
                         child[i] |= LANE_MODE;
+                    } else if pb.lanes_in_box::<CONS>([b[0][i], b[2][i], b[4][i]], [b[1][i], b[3][i], b[5][i]], *tfar)
+                        == 0
+                    {
+                        mask &= !(1 << i);
                     }
+                }
+                if mask == 0 {
+                    continue 'pop;
                 }
                 match order_children::<ANY>(stack, &child, mask, &d) {
                     Some(next) => cur = next,
