@@ -1,8 +1,9 @@
 //! Criterion benchmarks of the kernels: BVH build, and primary, shadow and diffuse rays through the
 //! single, packet and stream APIs on one thread. `Throughput::Elements` makes criterion print rays/s.
 //!
-//! Scenes: a generated sphereflake (always) and the shared bunny and Sponza when `../shared/scenes`
-//! is present. Ray sets are built once per scene with fixed seeds.
+//! Scenes: a generated sphereflake (always), the instanced forest of `data/forest.toml` (always),
+//! and the shared bunny and Sponza when `../shared/scenes` is present. Ray sets are built once per
+//! scene with fixed seeds.
 
 use std::path::Path;
 
@@ -53,7 +54,7 @@ fn bench_build(c: &mut Criterion) {
     g.finish();
 }
 
-fn trace_all(scene: &Scene, rays: &RayStream, occlusion: bool, api: &str, coherence: Coherence) -> usize {
+fn trace_all<Q: Query>(scene: &Q, rays: &RayStream, occlusion: bool, api: &str, coherence: Coherence) -> usize {
     match (api, occlusion) {
         ("single", false) => (0..rays.len()).filter(|&i| scene.intersect(&rays.get(i)).is_some()).count(),
         ("single", true) => (0..rays.len()).filter(|&i| scene.occluded(&rays.get(i))).count(),
@@ -87,28 +88,44 @@ fn bench_rays(c: &mut Criterion) {
     for case in cases() {
         let scene = Scene::build(case.meshes, &BuildConfig::default()).unwrap();
         let cam = Camera::look_at(case.eye, case.at, Vec3::Y, 60.0);
-        let (primary, _) = raygen::primary(&cam, 256, 256);
-        let mut hits = HitStream::default();
-        scene.intersect_stream(&primary, &mut hits, Coherence::Coherent);
-        let eps = 1e-4 * scene.bounds().map(|(lo, hi)| (hi - lo).length()).unwrap_or(1.0);
-        let (shadow, _) = raygen::shadow(&primary, &hits, case.light, eps);
-        let (diffuse, _) = raygen::diffuse(&primary, &hits, 1, eps);
-        let mut g = c.benchmark_group(format!("rays/{}", case.name));
-        g.sample_size(10);
-        for (class, rays, occlusion, coherence) in [
-            ("primary", &primary, false, Coherence::Coherent),
-            ("shadow", &shadow, true, Coherence::Incoherent),
-            ("diffuse", &diffuse, false, Coherence::Incoherent),
-        ] {
-            g.throughput(Throughput::Elements(rays.len() as u64));
-            for api in ["single", "packet", "stream"] {
-                g.bench_with_input(BenchmarkId::new(class, api), rays, |b, rays| {
-                    b.iter(|| trace_all(&scene, rays, occlusion, api, coherence))
-                });
-            }
-        }
-        g.finish();
+        bench_scene(c, case.name, &scene, scene.bounds(), &cam, case.light);
     }
+    // Instanced: 762 instances, 13.5 million placed triangles.
+    let file = strahl::SceneFile::read(Path::new(env!("CARGO_MANIFEST_DIR")).join("data/forest.toml")).unwrap();
+    let scene = file.build(&BuildConfig::default()).unwrap();
+    let cam = file.camera.unwrap().camera();
+    bench_scene(c, "forest_instanced", &scene, scene.bounds(), &cam, file.lights[0].position);
+}
+
+fn bench_scene<Q: Query>(
+    c: &mut Criterion,
+    name: &str,
+    scene: &Q,
+    bounds: Option<(Vec3, Vec3)>,
+    cam: &Camera,
+    light: Vec3,
+) {
+    let (primary, _) = raygen::primary(cam, 256, 256);
+    let mut hits = HitStream::default();
+    scene.intersect_stream(&primary, &mut hits, Coherence::Coherent);
+    let eps = 1e-4 * bounds.map(|(lo, hi)| (hi - lo).length()).unwrap_or(1.0);
+    let (shadow, _) = raygen::shadow(&primary, &hits, light, eps);
+    let (diffuse, _) = raygen::diffuse(&primary, &hits, 1, eps);
+    let mut g = c.benchmark_group(format!("rays/{name}"));
+    g.sample_size(10);
+    for (class, rays, occlusion, coherence) in [
+        ("primary", &primary, false, Coherence::Coherent),
+        ("shadow", &shadow, true, Coherence::Incoherent),
+        ("diffuse", &diffuse, false, Coherence::Incoherent),
+    ] {
+        g.throughput(Throughput::Elements(rays.len() as u64));
+        for api in ["single", "packet", "stream"] {
+            g.bench_with_input(BenchmarkId::new(class, api), rays, |b, rays| {
+                b.iter(|| trace_all(scene, rays, occlusion, api, coherence))
+            });
+        }
+    }
+    g.finish();
 }
 
 criterion_group!(benches, bench_build, bench_rays);
