@@ -263,14 +263,7 @@ impl InstancedScene {
         if !ray.is_valid() || self.root == EMPTY {
             return None;
         }
-        with_stack(|stack| {
-            macro_rules! go {
-                ($k:ty, $c:expr) => {
-                    self.trace1_with::<ANY, $k, $c>(ray, stack)
-                };
-            }
-            dispatch!(self.test, self.box_test, go)
-        })
+        with_stack(|stack| dispatch!(self.test, self.box_test, |K, C| self.trace1_with::<ANY, K, C>(ray, stack)))
     }
 
     /// The instance level's walk; at each instance the object's walk continues on the same stack
@@ -307,14 +300,7 @@ impl InstancedScene {
     }
 
     fn trace_packet<const ANY: bool>(&self, p: &RayPacket) -> PacketHits {
-        with_stack(|stack| {
-            macro_rules! go {
-                ($k:ty, $c:expr) => {
-                    self.trace_packet_with::<ANY, $k, $c>(p, stack)
-                };
-            }
-            dispatch!(self.test, self.box_test, go)
-        })
+        with_stack(|stack| dispatch!(self.test, self.box_test, |K, C| self.trace_packet_with::<ANY, K, C>(p, stack)))
     }
 
     fn trace_packet_with<const ANY: bool, K: Kernel, const CONS: bool>(

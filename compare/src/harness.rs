@@ -345,22 +345,14 @@ pub fn run_scene(
 
     // Builds: best of a few, each engine on the same 2 threads.
     progress("building");
-    let mut scene = None;
-    let mut strahl_ms = f64::INFINITY;
-    for _ in 0..settings.build_repeats.max(1) {
-        let s = pool.install(|| Scene::build(meshes.clone(), &BuildConfig::default()))?;
-        strahl_ms = strahl_ms.min(s.stats().build_ms);
-        scene = Some(s);
-    }
-    let scene = scene.expect("built at least once");
-    let mut embree_ms = f64::INFINITY;
-    let mut escene = None;
-    for _ in 0..settings.build_repeats.max(1) {
-        let e = embree::Scene::build(device, &meshes, embree::Quality::Medium, false)?;
-        embree_ms = embree_ms.min(e.build_ms);
-        escene = Some(e);
-    }
-    let escene = escene.expect("built at least once");
+    let reps = settings.build_repeats;
+    let (scene, strahl_ms) = best_build(
+        reps,
+        || Ok(pool.install(|| Scene::build(meshes.clone(), &BuildConfig::default()))?),
+        |s| s.stats().build_ms,
+    )?;
+    let (escene, embree_ms) =
+        best_build(reps, || embree::Scene::build(device, &meshes, embree::Quality::Medium, false), |e| e.build_ms)?;
     let embree_high_ms = embree::Scene::build(device, &meshes, embree::Quality::High, false)?.build_ms;
     let st = scene.stats();
     let build = BuildResult {
@@ -402,6 +394,21 @@ pub fn run_scene(
     })
 }
 
+/// Builds `repeats` times (at least once): the last build and the least of `ms` over all of them.
+fn best_build<T>(
+    repeats: usize,
+    mut build: impl FnMut() -> anyhow::Result<T>,
+    ms: impl Fn(&T) -> f64,
+) -> anyhow::Result<(T, f64)> {
+    let mut last = build()?;
+    let mut best = ms(&last);
+    for _ in 1..repeats {
+        last = build()?;
+        best = best.min(ms(&last));
+    }
+    Ok((last, best))
+}
+
 /// Runs one instanced scene (a scene file) through both engines, and through strahl flattened
 /// where that fits.
 fn run_instanced(
@@ -415,14 +422,12 @@ fn run_instanced(
     let objects = file.load_objects()?;
     progress("building");
     let cfg = BuildConfig::default();
-    let mut scene = None;
-    let mut strahl_ms = f64::INFINITY;
-    for _ in 0..settings.build_repeats.max(1) {
-        let s = pool.install(|| InstancedScene::build(objects.clone(), file.instances.clone(), &cfg))?;
-        strahl_ms = strahl_ms.min(s.stats().objects_build_ms + s.stats().top_build_ms);
-        scene = Some(s);
-    }
-    let scene = scene.expect("built at least once");
+    let reps = settings.build_repeats;
+    let (scene, strahl_ms) = best_build(
+        reps,
+        || Ok(pool.install(|| InstancedScene::build(objects.clone(), file.instances.clone(), &cfg))?),
+        |s| s.stats().objects_build_ms + s.stats().top_build_ms,
+    )?;
     let xfms: Vec<(usize, [f32; 12])> = file
         .instances
         .iter()
@@ -435,14 +440,11 @@ fn run_instanced(
             (i.object, c)
         })
         .collect();
-    let mut embree_ms = f64::INFINITY;
-    let mut escene = None;
-    for _ in 0..settings.build_repeats.max(1) {
-        let e = embree::Scene::build_instanced(device, &objects, &xfms, embree::Quality::Medium)?;
-        embree_ms = embree_ms.min(e.build_ms);
-        escene = Some(e);
-    }
-    let escene = escene.expect("built at least once");
+    let (escene, embree_ms) = best_build(
+        reps,
+        || embree::Scene::build_instanced(device, &objects, &xfms, embree::Quality::Medium),
+        |e| e.build_ms,
+    )?;
     let st = scene.stats().clone();
     let flat = if st.instanced_triangles <= FLATTEN_LIMIT {
         progress("flattening");

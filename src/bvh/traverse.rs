@@ -182,19 +182,24 @@ pub(crate) fn with_stack<R>(f: impl FnOnce(&mut Stack) -> R) -> R {
     })
 }
 
-/// Calls `$go!(Kernel, CONS)` with the kernel type and box-test flag of a `(TriangleTest,
-/// BoxTest)` pair: the one place the six monomorphized kernels are chosen.
+/// Evaluates `$body` with `$k` bound to the kernel type and `$c` to the box-test flag of a
+/// `(TriangleTest, BoxTest)` pair: the one place the six monomorphized kernels are chosen.
 macro_rules! dispatch {
-    ($test:expr, $boxes:expr, $go:ident) => {
+    ($test:expr, $boxes:expr, |$k:ident, $c:ident| $body:expr) => {
         match ($test, $boxes) {
-            (TriangleTest::MollerTrumbore, BoxTest::Conservative) => $go!(Moller, true),
-            (TriangleTest::MollerTrumbore, BoxTest::Fast) => $go!(Moller, false),
-            (TriangleTest::Badouel, BoxTest::Conservative) => $go!(Badouel, true),
-            (TriangleTest::Badouel, BoxTest::Fast) => $go!(Badouel, false),
-            (TriangleTest::Watertight, BoxTest::Conservative) => $go!(Watertight, true),
-            (TriangleTest::Watertight, BoxTest::Fast) => $go!(Watertight, false),
+            (TriangleTest::MollerTrumbore, BoxTest::Conservative) => dispatch!(@arm Moller, true, $k, $c, $body),
+            (TriangleTest::MollerTrumbore, BoxTest::Fast) => dispatch!(@arm Moller, false, $k, $c, $body),
+            (TriangleTest::Badouel, BoxTest::Conservative) => dispatch!(@arm Badouel, true, $k, $c, $body),
+            (TriangleTest::Badouel, BoxTest::Fast) => dispatch!(@arm Badouel, false, $k, $c, $body),
+            (TriangleTest::Watertight, BoxTest::Conservative) => dispatch!(@arm Watertight, true, $k, $c, $body),
+            (TriangleTest::Watertight, BoxTest::Fast) => dispatch!(@arm Watertight, false, $k, $c, $body),
         }
     };
+    (@arm $kernel:ty, $cons:expr, $k:ident, $c:ident, $body:expr) => {{
+        type $k = $kernel;
+        const $c: bool = $cons;
+        $body
+    }};
 }
 pub(crate) use dispatch;
 
@@ -388,14 +393,7 @@ impl Bvh {
         if !ray.is_valid() || self.root == EMPTY {
             return None;
         }
-        with_stack(|stack| {
-            macro_rules! go {
-                ($k:ty, $c:expr) => {
-                    self.trace1_with::<ANY, $k, $c>(ray, stack)
-                };
-            }
-            dispatch!(self.test, self.box_test, go)
-        })
+        with_stack(|stack| dispatch!(self.test, self.box_test, |K, C| self.trace1_with::<ANY, K, C>(ray, stack)))
     }
 
     /// [`trace1`](Self::trace1) with a chosen kernel, on `stack` above its current entries; the
@@ -434,14 +432,7 @@ impl Bvh {
     /// Closest hits (`ANY = false`) or occlusion (`ANY = true`) of the active lanes of a packet.
     /// Invalid rays in active lanes are answered with a miss.
     pub fn trace_packet<const ANY: bool>(&self, p: &RayPacket) -> PacketHits {
-        with_stack(|stack| {
-            macro_rules! go {
-                ($k:ty, $c:expr) => {
-                    self.trace_packet_with::<ANY, $k, $c>(p, stack)
-                };
-            }
-            dispatch!(self.test, self.box_test, go)
-        })
+        with_stack(|stack| dispatch!(self.test, self.box_test, |K, C| self.trace_packet_with::<ANY, K, C>(p, stack)))
     }
 
     /// [`trace_packet`](Self::trace_packet) with a chosen kernel, on `stack` above its current
