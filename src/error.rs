@@ -29,6 +29,8 @@ pub enum Error {
     SceneFile { path: PathBuf, message: String },
     #[error("instance {instance} places object {object}, but there are only {objects} objects")]
     UnknownObject { instance: usize, object: usize, objects: usize },
+    #[error("scene has {0} instances; at most 2^27 - 1 are supported")]
+    TooManyInstances(usize),
     #[error("the objects of an instanced scene must share one triangle test and one box test")]
     MixedTests,
     #[error("instance {instance} has a transform that is not finite and invertible")]

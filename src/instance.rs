@@ -137,7 +137,7 @@ impl InstancedScene {
             return Err(Error::MixedTests);
         }
         if instances.len() > MAX_BLOCK_INDEX {
-            return Err(Error::TooManyGeometries(instances.len()));
+            return Err(Error::TooManyInstances(instances.len()));
         }
         let mut prims = Vec::with_capacity(instances.len());
         for (i, inst) in instances.iter().enumerate() {
@@ -145,8 +145,7 @@ impl InstancedScene {
                 return Err(Error::UnknownObject { instance: i, object: inst.object, objects: objects.len() });
             };
             let m = inst.transform;
-            let det = m.matrix3.determinant();
-            if !m.is_finite() || det == 0.0 || !det.is_finite() || !m.inverse().is_finite() {
+            if !is_invertible(&m) {
                 return Err(Error::BadTransform { instance: i });
             }
             if let Some((lo, hi)) = obj.bounds() {
@@ -368,6 +367,12 @@ struct PacketHits {
     mask: u32,
     placed: [u32; PACKET_WIDTH],
     hit: [Option<LeafHit>; PACKET_WIDTH],
+}
+
+/// Whether `m` is finite with a finite inverse: what an instance's transform must be.
+pub(crate) fn is_invertible(m: &Affine3A) -> bool {
+    let det = m.matrix3.determinant();
+    m.is_finite() && det != 0.0 && det.is_finite() && m.inverse().is_finite()
 }
 
 /// `ray` in object space over `(tnear, tfar]`; the direction keeps the transform's scale.

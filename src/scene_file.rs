@@ -242,12 +242,7 @@ fn trs(t: Vec3, rot_deg: Vec3, s: Vec3) -> Affine3A {
 }
 
 fn check_transform(m: &Affine3A) -> std::result::Result<(), String> {
-    let det = m.matrix3.determinant();
-    if m.is_finite() && det != 0.0 && det.is_finite() {
-        Ok(())
-    } else {
-        Err("the transform is not finite and invertible".into())
-    }
+    if crate::instance::is_invertible(m) { Ok(()) } else { Err("the transform is not finite and invertible".into()) }
 }
 
 #[derive(Deserialize)]
