@@ -225,7 +225,9 @@ pub struct BuildResult {
 pub fn embree_stats(spec: &SceneSpec, threads: usize) -> Option<Vec<(f64, f64)>> {
     let arg = match &spec.source {
         crate::scenes::Source::Obj(p) => p.to_string_lossy().into_owned(),
-        crate::scenes::Source::Sphereflake { .. } => "sphereflake".to_string(),
+        crate::scenes::Source::Sphereflake { levels, stacks, slices } => {
+            format!("sphereflake:{levels}:{stacks}:{slices}")
+        }
         crate::scenes::Source::SceneFile(_) => return None,
     };
     let exe = std::env::current_exe().ok()?;

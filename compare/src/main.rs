@@ -60,6 +60,10 @@ struct Args {
     /// verbose device and let Embree print its BVH statistics (read by the parent harness).
     #[arg(long, hide = true)]
     embree_stats_of: Option<String>,
+    /// Also run the scaling series: sphereflakes from 11 thousand to 11 million triangles at up to
+    /// 512×512 primary rays and 3 passes; adds `scaling` to the JSON and scaling.png.
+    #[arg(long)]
+    scaling: bool,
     /// Exit with an error if any scene and class has hit/miss agreement below this fraction.
     #[arg(long)]
     min_agreement: Option<f64>,
@@ -79,7 +83,17 @@ fn main() -> anyhow::Result<()> {
         return write_sphereflake(p);
     }
     if let Some(scene) = &args.embree_stats_of {
-        let spec = if scene == "sphereflake" { scenes::sphereflake() } else { scenes::from_path(Path::new(scene))? };
+        let spec = match scene.strip_prefix("sphereflake:") {
+            Some(params) => {
+                let p: Vec<u32> = params.split(':').map(str::parse).collect::<Result<_, _>>()?;
+                let [levels, stacks, slices] = p[..] else { bail!("sphereflake:LEVELS:STACKS:SLICES") };
+                scenes::SceneSpec {
+                    source: scenes::Source::Sphereflake { levels, stacks, slices },
+                    ..scenes::sphereflake()
+                }
+            }
+            None => scenes::from_path(Path::new(scene))?,
+        };
         let meshes = spec.load()?;
         let device = embree::Device::new(&format!("threads={},verbose=2", args.threads))?;
         for q in [embree::Quality::Medium, embree::Quality::High] {
@@ -145,6 +159,34 @@ fn main() -> anyhow::Result<()> {
     bar.finish_and_clear();
 
     let mut rep = report::build_report(&results, args.threads, args.width, args.passes);
+    if args.scaling {
+        let small = Settings {
+            width: args.width.min(512),
+            passes: args.passes.min(3),
+            build_repeats: 1,
+            keep_rays: false,
+            ..Settings::default()
+        };
+        let series = scenes::scaling();
+        let bar = ProgressBar::new((series.len() * 5) as u64);
+        bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} {elapsed} {msg}").expect("valid template"));
+        let mut rows = Vec::new();
+        for spec in &series {
+            let mut r = harness::run_scene(spec, &pool, &device, &small, |step| {
+                bar.set_message(format!("scaling {}: {step}", spec.name));
+                bar.inc(1);
+            })?;
+            if let Some(stats) = harness::embree_stats(spec, args.threads) {
+                r.build.embree_bytes_per_tri = Some(stats[0].1);
+            }
+            rows.push(report::ScalingRow::of(&r));
+        }
+        bar.finish_and_clear();
+        rep.scaling = rows;
+        if let Err(e) = report::scaling_chart(&args.out.join("scaling.png"), &rep.scaling) {
+            eprintln!("scaling chart skipped: {e:#}");
+        }
+    }
     // Instanced against flattened with the world moved out to 1e6, on the forest scene.
     if let Some(spec) = specs.iter().find(|s| s.name == "forest")
         && let Some(file) = spec.scene_file()?

@@ -26,6 +26,9 @@ pub struct Report {
     /// Instanced against flattened strahl with the world moved away from the origin.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub instancing_translations: Vec<crate::harness::TranslationRow>,
+    /// Throughput, build time and memory against triangle count (with `--scaling`).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub scaling: Vec<ScalingRow>,
     /// Every triangle test × box test against Embree's modes (with `--accuracy`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub accuracy: Option<crate::methods::AccuracyReport>,
@@ -165,6 +168,7 @@ pub fn build_report(results: &[SceneResult], threads: usize, width: u32, passes:
         geomean_best_ratio: gm(&logs),
         geomean_best_ratio_instanced: gm(&logs_inst),
         instancing_translations: Vec::new(),
+        scaling: Vec::new(),
         accuracy: None,
     }
 }
@@ -280,6 +284,7 @@ pub fn markdown(r: &Report) -> String {
         );
     }
     instancing_markdown(&mut s, r);
+    scaling_markdown(&mut s, &r.scaling);
     let _ = writeln!(s, "\n## Disagreements, decided in float64\n");
     let _ = writeln!(
         s,
@@ -375,6 +380,168 @@ pub fn markdown(r: &Report) -> String {
         }
     }
     s
+}
+
+/// One scene of the scaling series.
+#[derive(Serialize)]
+pub struct ScalingRow {
+    pub name: String,
+    pub triangles: usize,
+    /// `(class, strahl best Mrays/s, Embree best Mrays/s)`.
+    pub mrays: Vec<(&'static str, f64, f64)>,
+    /// Every API: `(class, strahl single/packet/stream, Embree single/packet/stream)` in Mrays/s.
+    pub apis: Vec<(&'static str, [f64; 3], [f64; 3])>,
+    pub hit_miss_agreement_min: f64,
+    pub strahl_build_ms: f64,
+    pub embree_build_ms: f64,
+    pub strahl_bytes_per_tri: f64,
+    pub embree_bytes_per_tri: Option<f64>,
+}
+
+impl ScalingRow {
+    pub fn of(r: &SceneResult) -> Self {
+        Self {
+            name: r.name.clone(),
+            triangles: r.triangles,
+            mrays: r.classes.iter().map(|c| (c.class.name(), c.best(0).1, c.best(1).1)).collect(),
+            apis: r
+                .classes
+                .iter()
+                .map(|c| {
+                    (c.class.name(), Api::ALL.map(|a| c.mrays(0, a, false)), Api::ALL.map(|a| c.mrays(1, a, false)))
+                })
+                .collect(),
+            hit_miss_agreement_min: r.classes.iter().map(|c| c.accuracy.hit_miss_agreement).fold(1.0, f64::min),
+            strahl_build_ms: r.build.strahl_ms,
+            embree_build_ms: r.build.embree_ms,
+            strahl_bytes_per_tri: r.build.strahl_bytes_per_tri,
+            embree_bytes_per_tri: r.build.embree_bytes_per_tri,
+        }
+    }
+}
+
+/// Two panels against triangle count (log scales): best-API Mrays/s per class for both engines,
+/// and build time for both.
+pub fn scaling_chart(path: &Path, rows: &[ScalingRow]) -> anyhow::Result<()> {
+    use plotters::prelude::*;
+    if !ensure_font() {
+        anyhow::bail!("no DejaVu font found for chart labels (apt-get install fonts-dejavu-core)");
+    }
+    if rows.is_empty() {
+        return Ok(());
+    }
+    let tmin = rows.iter().map(|r| r.triangles).min().unwrap_or(1).max(1) as f64 / 1.5;
+    let tmax = rows.iter().map(|r| r.triangles).max().unwrap_or(1).max(1) as f64 * 1.5;
+    let root = BitMapBackend::new(path, (1400, 560)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let (left, right) = root.split_horizontally(820);
+    let colors = [RGBColor(66, 133, 244), RGBColor(52, 168, 83), RGBColor(234, 67, 53)];
+    let mr = |f: &dyn Fn(&(&str, f64, f64)) -> f64| rows.iter().flat_map(|r| r.mrays.iter().map(f)).collect::<Vec<_>>();
+    let all: Vec<f64> = [mr(&|m| m.1), mr(&|m| m.2)].concat();
+    let ymin = all.iter().copied().fold(f64::INFINITY, f64::min).max(0.01) / 1.5;
+    let ymax = all.iter().copied().fold(0.0, f64::max) * 1.5;
+    let mut chart = ChartBuilder::on(&left)
+        .caption("Mrays/s (best API) against triangles, 2 threads; dashed: Embree", ("sans-serif", 20))
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(55)
+        .build_cartesian_2d((tmin..tmax).log_scale(), (ymin..ymax).log_scale())?;
+    chart.configure_mesh().x_desc("triangles").y_desc("Mrays/s").label_style(("sans-serif", 14)).draw()?;
+    for (k, class) in ["primary", "shadow", "diffuse"].iter().enumerate() {
+        let pts = |engine: usize| -> Vec<(f64, f64)> {
+            rows.iter()
+                .filter_map(|r| {
+                    r.mrays
+                        .iter()
+                        .find(|m| m.0 == *class)
+                        .map(|m| (r.triangles as f64, if engine == 0 { m.1 } else { m.2 }))
+                })
+                .collect()
+        };
+        let c = colors[k];
+        chart
+            .draw_series(LineSeries::new(pts(0), c.stroke_width(3)))?
+            .label(format!("strahl {class}"))
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(3)));
+        chart
+            .draw_series(DashedLineSeries::new(pts(1), 6, 4, c.stroke_width(2)))?
+            .label(format!("Embree {class}"))
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(1)));
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::LowerLeft)
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 13))
+        .draw()?;
+    let bmin = rows.iter().flat_map(|r| [r.strahl_build_ms, r.embree_build_ms]).fold(f64::INFINITY, f64::min).max(0.01);
+    let bmax = rows.iter().flat_map(|r| [r.strahl_build_ms, r.embree_build_ms]).fold(0.0, f64::max);
+    let mut chart = ChartBuilder::on(&right)
+        .caption("build ms against triangles", ("sans-serif", 20))
+        .margin(15)
+        .x_label_area_size(45)
+        .y_label_area_size(55)
+        .build_cartesian_2d((tmin..tmax).log_scale(), (bmin / 1.5..bmax * 1.5).log_scale())?;
+    chart.configure_mesh().x_desc("triangles").y_desc("ms").label_style(("sans-serif", 14)).draw()?;
+    let black = RGBColor(40, 40, 40);
+    chart
+        .draw_series(LineSeries::new(
+            rows.iter().map(|r| (r.triangles as f64, r.strahl_build_ms)),
+            black.stroke_width(3),
+        ))?
+        .label("strahl")
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], black.stroke_width(3)));
+    chart
+        .draw_series(DashedLineSeries::new(
+            rows.iter().map(|r| (r.triangles as f64, r.embree_build_ms)),
+            6,
+            4,
+            black.stroke_width(2),
+        ))?
+        .label("Embree MEDIUM")
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], black.stroke_width(1)));
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperLeft)
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 13))
+        .draw()?;
+    root.present()?;
+    Ok(())
+}
+
+/// The scaling series as a Markdown table.
+fn scaling_markdown(s: &mut String, rows: &[ScalingRow]) {
+    if rows.is_empty() {
+        return;
+    }
+    let _ = writeln!(s, "\n## Scaling (best API, Mrays/s strahl / Embree)\n");
+    let _ = writeln!(
+        s,
+        "| scene | triangles | primary | shadow | diffuse | min hit/miss agree | build ms strahl / Embree | B/tri strahl / Embree |"
+    );
+    let _ = writeln!(s, "|---|---:|---:|---:|---:|---:|---:|---:|");
+    for r in rows {
+        let cell = |k: usize| {
+            r.mrays.get(k).map(|m| format!("{:.1} / {:.1} ({:.2}×)", m.1, m.2, m.1 / m.2)).unwrap_or_default()
+        };
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {} | {} | {} | {:.1} / {:.1} | {:.1} / {} |",
+            r.name,
+            r.triangles,
+            cell(0),
+            cell(1),
+            cell(2),
+            pct(r.hit_miss_agreement_min),
+            r.strahl_build_ms,
+            r.embree_build_ms,
+            r.strahl_bytes_per_tri,
+            r.embree_bytes_per_tri.map(|b| format!("{b:.1}")).unwrap_or_else(|| "–".into())
+        );
+    }
 }
 
 /// The instanced scenes' memory and flat agreement, and the translation sweep.

@@ -78,6 +78,23 @@ pub fn data(dir: &Path) -> Vec<SceneSpec> {
     v
 }
 
+/// The scaling series: sphereflakes of one shape from 11 thousand to 11 million triangles
+/// (`levels`, `stacks`; slices are twice the stacks), well past a 32 MiB L3 cache at the top.
+pub fn scaling() -> Vec<SceneSpec> {
+    [(2, 6), (2, 10), (3, 6), (3, 10), (3, 18), (4, 10), (4, 20)]
+        .into_iter()
+        .map(|(levels, stacks)| {
+            let tris = (9usize.pow(levels + 1) - 1) / 8 * (4 * stacks * stacks - 4 * stacks) as usize;
+            SceneSpec {
+                name: format!("flake_{}k", tris / 1000),
+                source: Source::Sphereflake { levels, stacks, slices: 2 * stacks },
+                view: Some((Vec3::new(0.0, 1.3, 3.4), Vec3::new(0.0, 0.25, 0.0))),
+                light: Some(Vec3::new(3.0, 6.0, 4.0)),
+            }
+        })
+        .collect()
+}
+
 /// An instanced scene from a scene file; camera and light come from the file.
 pub fn scene_file(name: &str, path: PathBuf) -> SceneSpec {
     SceneSpec { name: name.into(), source: Source::SceneFile(path), view: None, light: None }
