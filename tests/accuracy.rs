@@ -146,9 +146,9 @@ fn reintersection_from_hit_points() {
                 let mut occ = Vec::new();
                 scene.occluded_stream(&lit, &mut occ, Coherence::Incoherent);
                 let false_occ = occ.iter().filter(|&&o| o).count();
-                // Wächter–Binder moves each coordinate by 256 of its own ulps: the offset is
-                // skewed off the normal by the ratio of the coordinates' magnitudes, and is as
-                // large as the whole sphere when the sphere spans only a few hundred ulps.
+                // The offset is 256 ulps of the largest coordinate along the normal: as large as
+                // the whole sphere when the sphere spans only a few hundred ulps (151 of 2,677 lit
+                // points falsely occluded at 140 ulps across; 65 with per-coordinate ulps).
                 let ulps_across = scale / (center.abs().max_element().max(scale) * f32::EPSILON);
                 eprintln!(
                     "{test:?} offset {offset:e} scale {scale:e} ({ulps_across:.0} ulps across): self-hits {self_hits} of {}, false occlusions {false_occ} of {}",

@@ -213,3 +213,40 @@ fn memory_counts_objects_once() {
     assert!(s.instanced_triangles > 50 * s.unique_triangles as u64);
     assert!((s.bytes as u64) * 10 < s.flattened_bytes, "{} vs {}", s.bytes, s.flattened_bytes);
 }
+
+#[test]
+fn offset_secondary_rays_do_not_hit_their_own_convex_instance() {
+    // Rays leaving a sphere outward can hit nothing in a world of that one sphere. The sphere is
+    // small and far out, so the object-space transform of a ray origin rounds by about as much as
+    // an offset based on each coordinate's own ulps would move it (the error of one run's
+    // big world). Leaving by `offset_ray_origin` must still never hit the sphere again.
+    let mut self_hits = 0;
+    let mut rays = 0;
+    for (k, t) in
+        [Vec3::new(3.0, 0.4, -157.0), Vec3::new(-900.0, 0.2, 40.0), Vec3::new(1e4, 1e4, 0.3)].iter().enumerate()
+    {
+        let objects = vec![vec![procedural::uv_sphere(Vec3::ZERO, 0.05, 16, 32)]];
+        let rot = Quat::from_axis_angle(Vec3::new(0.3, 1.0, 0.2).normalize(), 0.7);
+        let inst = Instance::new(0, Affine3A::from_scale_rotation_translation(Vec3::splat(1.3), rot, *t));
+        let scene = InstancedScene::build(objects, vec![inst], &BuildConfig::watertight()).unwrap();
+        let mut rng = Pcg32::new(40 + k as u64, 1);
+        for _ in 0..4000 {
+            let from = *t + uniform_direction(&mut rng) * 2.0;
+            let Some(h) = scene.intersect(&Ray::new(from, *t - from)) else { continue };
+            let p = from + (*t - from) * h.t;
+            // Facing the way the ray came from, i.e. outward.
+            let n = if h.ng.dot(*t - from) < 0.0 { h.ng } else { -h.ng };
+            let o = strahl::offset_ray_origin(p, n);
+            let mut d = uniform_direction(&mut rng);
+            if d.dot(n) < 0.0 {
+                d = -d;
+            }
+            rays += 1;
+            if scene.occluded(&Ray::new(o, d)) {
+                self_hits += 1;
+            }
+        }
+    }
+    assert!(rays > 10_000, "{rays}");
+    assert_eq!(self_hits, 0, "{self_hits} of {rays} outward rays hit their own sphere");
+}
