@@ -14,15 +14,34 @@ pub const EDGE_TOL: f64 = 1e-5;
 
 /// The barycentric tie tolerance for `ray` against `tri`: the f32 edge functions carry absolute
 /// errors of a few ulps of the coordinates involved (origin and corners), which in barycentric
-/// terms is that error over the triangle's size. 64 ulps, never below [`EDGE_TOL`].
+/// terms is that error over the triangle's size, and over the cosine between ray and plane (a
+/// grazing ray moves its hit point along the plane by the error over that cosine). 64 ulps,
+/// never below [`EDGE_TOL`].
 pub fn edge_tolerance(ray: &Ray, tri: [Vec3; 3]) -> f64 {
-    let mag = tri.iter().map(|p| p.abs().max_element()).fold(ray.origin.abs().max_element(), f32::max) as f64;
-    let size = ((tri[1] - tri[0]).cross(tri[2] - tri[0]).length() as f64).sqrt();
+    let (err, size, cos) = conditioning(ray, tri);
     if size <= 0.0 || !size.is_finite() {
         return EDGE_TOL;
     }
-    (64.0 * f32::EPSILON as f64 * mag / size).max(EDGE_TOL)
+    (err / (size * cos)).max(EDGE_TOL)
 }
+
+/// The absolute tie tolerance on `t` for `ray` against `tri`: the same coordinate error, along the
+/// ray, over the cosine between ray and plane and the direction's length.
+pub fn depth_tolerance(ray: &Ray, tri: [Vec3; 3]) -> f64 {
+    let (err, _, cos) = conditioning(ray, tri);
+    err / (cos * (ray.dir.length() as f64).max(1e-30))
+}
+
+/// `(64 ulps of the largest coordinate, sqrt of twice the area, |cos| between ray and plane)`,
+/// the cosine floored at 1e-6.
+fn conditioning(ray: &Ray, tri: [Vec3; 3]) -> (f64, f64, f64) {
+    let mag = tri.iter().map(|p| p.abs().max_element()).fold(ray.origin.abs().max_element(), f32::max) as f64;
+    let n = (tri[1] - tri[0]).as_dvec3().cross((tri[2] - tri[0]).as_dvec3());
+    let size = n.length().sqrt();
+    let cos = (n.normalize_or_zero().dot(ray.dir.as_dvec3().normalize_or_zero())).abs().max(1e-6);
+    (64.0 * f32::EPSILON as f64 * mag, size, cos)
+}
+
 /// Relative distance between two candidate hits, or from a ray bound, below which they tie.
 pub const DEPTH_TOL: f64 = 1e-5;
 /// Occlusion disagreements decided by a float64 brute-force pass over all triangles, at most.
@@ -90,7 +109,8 @@ fn decide(ray: &Ray, tri: [Vec3; 3], h: Option<(f64, [f64; 3])>) -> (Option<bool
     if m.abs() <= edge_tolerance(ray, tri) {
         return (None, "edge_or_vertex");
     }
-    if (t - tn).abs() <= DEPTH_TOL * scale || (tf.is_finite() && (t - tf).abs() <= DEPTH_TOL * scale) {
+    let tol = (DEPTH_TOL * scale).max(depth_tolerance(ray, tri));
+    if (t - tn).abs() <= tol || (tf.is_finite() && (t - tf).abs() <= tol) {
         return (None, "depth");
     }
     (Some(m > 0.0 && t > tn && t <= tf), "clear")
@@ -266,7 +286,9 @@ pub fn compare(world: &dyn World, rays: &RayStream, occlusion: bool, s: &Answers
                 let mb = min3(bs).min(min3(be));
                 if min3(bs).abs() <= edge_tolerance(&ray, tri_s) || min3(be).abs() <= edge_tolerance(&ray, tri_e) {
                     ("edge_or_vertex_tie", mb, ts.min(te))
-                } else if (ts - te).abs() <= DEPTH_TOL * scale {
+                } else if (ts - te).abs()
+                    <= (DEPTH_TOL * scale).max(depth_tolerance(&ray, tri_s)).max(depth_tolerance(&ray, tri_e))
+                {
                     ("depth_tie", mb, ts.min(te))
                 } else if ts < te {
                     // strahl's triangle is nearer; Embree's answer is wrong unless strahl's is not a hit.
