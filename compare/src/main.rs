@@ -133,8 +133,7 @@ fn main() -> anyhow::Result<()> {
         keep_rays: args.dump_rays.is_some() || args.accuracy,
         ..Settings::default()
     };
-    let bar = ProgressBar::new((specs.len() * 5) as u64);
-    bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} {elapsed} {msg}").expect("valid template"));
+    let bar = progress_bar(specs.len());
     let mut results = Vec::new();
     for spec in &specs {
         let mut r = harness::run_scene(spec, &pool, &device, &settings, |step| {
@@ -168,8 +167,7 @@ fn main() -> anyhow::Result<()> {
             ..Settings::default()
         };
         let series = scenes::scaling();
-        let bar = ProgressBar::new((series.len() * 5) as u64);
-        bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} {elapsed} {msg}").expect("valid template"));
+        let bar = progress_bar(series.len());
         let mut rows = Vec::new();
         for spec in &series {
             let mut r = harness::run_scene(spec, &pool, &device, &small, |step| {
@@ -245,6 +243,13 @@ fn main() -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+/// A progress bar over `scenes` scenes of five steps each.
+fn progress_bar(scenes: usize) -> ProgressBar {
+    let bar = ProgressBar::new((scenes * 5) as u64);
+    bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} {elapsed} {msg}").expect("valid template"));
+    bar
 }
 
 fn dump(dir: &Path, spec: &scenes::SceneSpec, r: &harness::SceneResult) -> anyhow::Result<()> {
