@@ -250,3 +250,20 @@ fn offset_secondary_rays_do_not_hit_their_own_convex_instance() {
     assert!(rays > 10_000, "{rays}");
     assert_eq!(self_hits, 0, "{self_hits} of {rays} outward rays hit their own sphere");
 }
+
+#[test]
+fn prebuilt_objects_must_share_their_tests() {
+    let sphere = || vec![procedural::uv_sphere(Vec3::ZERO, 1.0, 8, 16)];
+    let a = strahl::Scene::build(sphere(), &BuildConfig::default()).unwrap();
+    let b = strahl::Scene::build(sphere(), &BuildConfig::watertight()).unwrap();
+    let place = |o| Instance::new(o, Affine3A::from_translation(Vec3::new(3.0 * o as f32, 0.0, 0.0)));
+    let e = InstancedScene::from_scenes(vec![a.clone(), b], vec![place(0), place(1)]).unwrap_err();
+    assert!(matches!(e, Error::MixedTests), "{e}");
+    let same = InstancedScene::from_scenes(vec![a.clone(), a], vec![place(0), place(1)]).unwrap();
+    let h = same.intersect(&Ray::new(Vec3::new(3.0, 5.0, 0.0), Vec3::new(0.0, -1.0, 0.0))).unwrap();
+    assert_eq!(h.inst_id, 1);
+    assert_eq!(
+        same.intersect(&Ray::new(Vec3::new(3.0, 5.0, 0.0), -Vec3::Y)),
+        same.intersect_brute_force(&Ray::new(Vec3::new(3.0, 5.0, 0.0), -Vec3::Y))
+    );
+}
