@@ -160,3 +160,31 @@ fn geometry_ids_for_every_method() {
         }
     }
 }
+
+#[test]
+fn negative_and_signed_zero_tnear_match_brute_force() {
+    // Node tests compare distances as integers when `tnear ≥ 0` and as floats otherwise; rays
+    // reaching behind their origin (`tnear < 0`), starting at `-0.0`, or bounded on both sides
+    // must find what brute force finds either way.
+    for test in TriangleTest::ALL {
+        for boxes in BoxTest::ALL {
+            let scene =
+                Scene::build(vec![random_soup(21, 5000, 0.05)], &BuildConfig::default().with_tests(test, boxes))
+                    .unwrap();
+            for (k, (tnear, tfar)) in
+                [(-0.0, f32::INFINITY), (-0.5, f32::INFINITY), (f32::NEG_INFINITY, 0.3), (-2.0, -0.5), (0.2, 0.6)]
+                    .into_iter()
+                    .enumerate()
+            {
+                // A segment wholly behind the origin: turn the ray around, so it still crosses the soup.
+                let flip = if tfar < 0.0 { -1.0 } else { 1.0 };
+                let rays: Vec<Ray> = random_rays(30 + k as u64, 1500)
+                    .into_iter()
+                    .map(|r| Ray { tnear, tfar, dir: r.dir * flip, ..r })
+                    .collect();
+                let hits = check_scene(&scene, &rays, &format!("{test:?} {boxes:?} ({tnear}, {tfar})"));
+                assert!(hits > 10, "{test:?} ({tnear}, {tfar}): {hits} hits");
+            }
+        }
+    }
+}

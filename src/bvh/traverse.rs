@@ -61,8 +61,10 @@ const WIDEN: f32 = 1.0 / (1u32 << 20) as f32;
 
 /// Stack entries: at most `WIDTH − 1` pushes per wide level; SAH levels are capped at
 /// `MEDIAN_DEPTH` and median levels below halve the set (at most 32 binary, so 32 wide levels).
-/// Twice that: an instance level and an object level share one stack.
-const STACK: usize = 2 * ((MEDIAN_DEPTH + 33) * (WIDTH - 1) + 1);
+/// Twice that: an instance level and an object level share one stack. Rounded up to a power of
+/// two, so that an index masked with `STACK − 1` needs no bounds check (the bound above keeps it
+/// from ever wrapping).
+const STACK: usize = (2 * ((MEDIAN_DEPTH + 33) * (WIDTH - 1) + 1)).next_power_of_two();
 
 #[inline(always)]
 fn safe_rcp(d: f32) -> f32 {
@@ -113,6 +115,9 @@ pub(crate) struct Stack {
     len: usize,
 }
 
+/// The walks keep the stack's length in a local `sp` (a register) and store it back only around
+/// leaf calls, which may walk an object on the same stack: with the length in the struct, every
+/// push reloaded and stored it (measured below in PERFORMANCE.md).
 impl Stack {
     const EMPTY: Stack = Stack { node: [0; STACK], dist: [0.0; STACK], len: 0 };
 
@@ -120,46 +125,43 @@ impl Stack {
     #[inline(always)]
     pub(crate) fn push_root(&mut self, root: u32) -> usize {
         let base = self.len;
-        self.push(root, f32::NEG_INFINITY);
+        let mut sp = self.len;
+        self.put(&mut sp, root, f32::NEG_INFINITY);
+        self.len = sp;
         base
     }
 
     #[inline(always)]
-    fn push(&mut self, node: u32, dist: f32) {
-        self.node[self.len] = node;
-        self.dist[self.len] = dist;
-        self.len += 1;
+    fn put(&mut self, sp: &mut usize, node: u32, dist: f32) {
+        debug_assert!(*sp < STACK);
+        let i = *sp & (STACK - 1);
+        self.node[i] = node;
+        self.dist[i] = dist;
+        *sp += 1;
     }
 
+    /// Pops the top entry; `sp` must be above zero.
     #[inline(always)]
-    fn pop(&mut self) -> Option<(u32, f32)> {
-        self.len = self.len.checked_sub(1)?;
-        Some((self.node[self.len], self.dist[self.len]))
+    fn take(&self, sp: &mut usize) -> (u32, f32) {
+        *sp -= 1;
+        let i = *sp & (STACK - 1);
+        (self.node[i], self.dist[i])
     }
 
-    /// Pops an entry above `base`, the level a walk started at.
+    /// Sorts the entries `base..sp` so that the nearest is on top.
     #[inline(always)]
-    fn pop_above(&mut self, base: usize) -> Option<(u32, f32)> {
-        if self.len <= base {
-            return None;
-        }
-        self.len -= 1;
-        Some((self.node[self.len], self.dist[self.len]))
-    }
-
-    /// Sorts the entries from `base` on so that the nearest is on top.
-    #[inline(always)]
-    fn sort_from(&mut self, base: usize) {
-        for i in base + 1..self.len {
-            let (n, d) = (self.node[i], self.dist[i]);
+    fn sort_from(&mut self, base: usize, sp: usize) {
+        const M: usize = STACK - 1;
+        for i in base + 1..sp {
+            let (n, d) = (self.node[i & M], self.dist[i & M]);
             let mut j = i;
-            while j > base && self.dist[j - 1] < d {
-                self.node[j] = self.node[j - 1];
-                self.dist[j] = self.dist[j - 1];
+            while j > base && self.dist[(j - 1) & M] < d {
+                self.node[j & M] = self.node[(j - 1) & M];
+                self.dist[j & M] = self.dist[(j - 1) & M];
                 j -= 1;
             }
-            self.node[j] = n;
-            self.dist[j] = d;
+            self.node[j & M] = n;
+            self.dist[j & M] = d;
         }
     }
 }
@@ -208,37 +210,38 @@ pub(crate) use dispatch;
 #[inline(always)]
 fn order_children<const ANY: bool>(
     stack: &mut Stack,
+    sp: &mut usize,
     child: &[u32; WIDTH],
     mut mask: u32,
     d: &[f32; WIDTH],
-) -> Option<u32> {
+) -> u32 {
     let i0 = mask.trailing_zeros() as usize;
     mask &= mask.wrapping_sub(1);
     // One child hit: descend without touching the stack.
     if mask == 0 {
-        return Some(child[i0]);
+        return child[i0];
     }
     // Two: descend into the nearer, push the farther.
     let i1 = mask.trailing_zeros() as usize;
     mask &= mask - 1;
     if mask == 0 {
         let (n, f) = if ANY || d[i0] <= d[i1] { (i0, i1) } else { (i1, i0) };
-        stack.push(child[f], d[f]);
-        return Some(child[n]);
+        stack.put(sp, child[f], d[f]);
+        return child[n];
     }
     // More: push all, order them nearest on top (not needed to find any hit), pop one.
-    let base = stack.len;
-    stack.push(child[i0], d[i0]);
-    stack.push(child[i1], d[i1]);
+    let base = *sp;
+    stack.put(sp, child[i0], d[i0]);
+    stack.put(sp, child[i1], d[i1]);
     while mask != 0 {
         let i = mask.trailing_zeros() as usize;
         mask &= mask - 1;
-        stack.push(child[i], d[i]);
+        stack.put(sp, child[i], d[i]);
     }
     if !ANY {
-        stack.sort_from(base);
+        stack.sort_from(base, *sp);
     }
-    stack.pop().map(|(n, _)| n)
+    stack.take(sp).0
 }
 
 /// Bounds on the ray parameters of a whole packet whose rays share a direction octant: per axis,
@@ -499,12 +502,20 @@ impl Bvh {
 pub(crate) struct BoxRay {
     rd: [f32x8; 3],
     od: [f32x8; 3],
+    /// The far planes' terms: for the conservative test, `rd·(1 + w)` and `od·(1 + w) − pad`, so
+    /// that `fmsub(box, rdf, odf)` is the widened far distance `(box·rd − od)·(1 + w) + pad`
+    /// without a multiply-add after the minimum (the same bound, one step shorter).
+    rdf: [f32x8; 3],
+    odf: [f32x8; 3],
     /// Row of the near plane per axis: the box minimum where the direction is positive.
     near: [usize; 3],
     far: [usize; 3],
     tnear: f32x8,
-    pad: f32x8,
-    widen: f32x8,
+    /// `(widen, pad)` of the conservative test, for the ray's own `tfar`.
+    far_scale: (f32, f32),
+    /// Whether `tnear ≥ 0`: then the minima and maxima run as integer operations (see
+    /// [`max_bits`]), else as float ones.
+    int_ok: bool,
 }
 
 impl BoxRay {
@@ -513,14 +524,22 @@ impl BoxRay {
         let rdir = Vec3::new(safe_rcp(ray.dir.x), safe_rcp(ray.dir.y), safe_rcp(ray.dir.z));
         let ordir = ray.origin * rdir;
         let near = [(rdir.x < 0.0) as usize, 2 + (rdir.y < 0.0) as usize, 4 + (rdir.z < 0.0) as usize];
+        let pad = WIDEN * ordir.abs().max_element();
+        let widen = 1.0 + WIDEN;
+        let (rdf, odf) = (rdir * widen, ordir * widen - Vec3::splat(pad));
+        // `-0.0 + 0.0` is `+0.0`, whose bits order correctly against positive distances.
+        let int_ok = ray.tnear >= 0.0;
+        let tnear = if int_ok { ray.tnear + 0.0 } else { ray.tnear };
         Self {
             rd: [f32x8::splat(rdir.x), f32x8::splat(rdir.y), f32x8::splat(rdir.z)],
             od: [f32x8::splat(ordir.x), f32x8::splat(ordir.y), f32x8::splat(ordir.z)],
+            rdf: [f32x8::splat(rdf.x), f32x8::splat(rdf.y), f32x8::splat(rdf.z)],
+            odf: [f32x8::splat(odf.x), f32x8::splat(odf.y), f32x8::splat(odf.z)],
             near,
             far: [near[0] ^ 1, near[1] ^ 1, near[2] ^ 1],
-            tnear: f32x8::splat(ray.tnear),
-            pad: f32x8::splat(WIDEN * ordir.abs().max_element()),
-            widen: f32x8::splat(1.0 + WIDEN),
+            tnear: f32x8::splat(tnear),
+            far_scale: (widen, pad),
+            int_ok,
         }
     }
 
@@ -528,14 +547,25 @@ impl BoxRay {
     #[inline(always)]
     fn test<const CONS: bool>(&self, node: &Node, tfar: f32) -> (u32, [f32; WIDTH]) {
         let b = &node.bounds;
-        let slab = |row: usize, a: usize| f32x8::new(b[row]).mul_sub(self.rd[a], self.od[a]);
-        let tn =
-            slab(self.near[0], 0).fast_max(slab(self.near[1], 1)).fast_max(slab(self.near[2], 2).fast_max(self.tnear));
-        let tf = slab(self.far[0], 0)
-            .fast_min(slab(self.far[1], 1))
-            .fast_min(slab(self.far[2], 2).fast_min(f32x8::splat(tfar)));
-        let mask = if CONS { tn.simd_le(tf.mul_add(self.widen, self.pad)) } else { tn.simd_le(tf) }.to_bitmask();
-        (mask, tn.to_array())
+        let near = |a: usize| f32x8::new(b[self.near[a]]).mul_sub(self.rd[a], self.od[a]);
+        let (n0, n1, n2) = (near(0), near(1), near(2));
+        let (f0, f1, f2, tf) = if CONS {
+            let far = |a: usize| f32x8::new(b[self.far[a]]).mul_sub(self.rdf[a], self.odf[a]);
+            (far(0), far(1), far(2), f32x8::splat(tfar.mul_add(self.far_scale.0, self.far_scale.1)))
+        } else {
+            let far = |a: usize| f32x8::new(b[self.far[a]]).mul_sub(self.rd[a], self.od[a]);
+            (far(0), far(1), far(2), f32x8::splat(tfar))
+        };
+        if self.int_ok {
+            // Integer minima and maxima: exact here because `tnear ≥ +0` enters the maximum.
+            let tn = max_bits(max_bits(n0, n1), max_bits(n2, self.tnear));
+            let tf = min_bits(min_bits(f0, f1), min_bits(f2, tf));
+            (le_bits(tn, tf), tn.to_array())
+        } else {
+            let tn = n0.fast_max(n1).fast_max(n2.fast_max(self.tnear));
+            let tf = f0.fast_min(f1).fast_min(f2.fast_min(tf));
+            (tn.simd_le(tf).to_bitmask(), tn.to_array())
+        }
     }
 }
 
@@ -551,16 +581,20 @@ pub(crate) fn walk1<const ANY: bool, const CONS: bool>(
     tfar: &mut f32,
     mut leaf: impl FnMut(u32, &mut f32, &mut Stack) -> bool,
 ) {
-    'pop: while let Some((mut cur, dist)) = stack.pop_above(base) {
+    let mut sp = stack.len;
+    'pop: while sp > base {
+        let (mut cur, dist) = stack.take(&mut sp);
         // Skip subtrees entered beyond the closest hit so far.
         if dist > *tfar {
             continue;
         }
         loop {
             if is_leaf(cur) {
-                if leaf(cur, tfar, stack) {
-                    stack.len = base;
-                    return;
+                stack.len = sp;
+                let done = leaf(cur, tfar, stack);
+                sp = stack.len;
+                if done {
+                    break 'pop;
                 }
                 continue 'pop;
             }
@@ -569,12 +603,10 @@ pub(crate) fn walk1<const ANY: bool, const CONS: bool>(
             if mask == 0 {
                 continue 'pop;
             }
-            match order_children::<ANY>(stack, &node.child, mask, &tn) {
-                Some(next) => cur = next,
-                None => continue 'pop,
-            }
+            cur = order_children::<ANY>(stack, &mut sp, &node.child, mask, &tn);
         }
     }
+    stack.len = base;
 }
 
 /// A packet's slab-test terms: per-lane reciprocals, and the frustum if the packet has one.
@@ -669,15 +701,19 @@ pub(crate) fn walk_packet<const ANY: bool, const CONS: bool>(
 ) {
     let inf = Pf::splat(f32::INFINITY);
     let mut tfar_max = hmax(*tfar);
-    'pop: while let Some((mut cur, dist)) = stack.pop_above(base) {
+    let mut sp = stack.len;
+    'pop: while sp > base {
+        let (mut cur, dist) = stack.take(&mut sp);
         if dist > tfar_max {
             continue;
         }
         loop {
             if is_leaf(cur) {
-                if leaf(cur, tfar, stack) {
-                    stack.len = base;
-                    return;
+                stack.len = sp;
+                let done = leaf(cur, tfar, stack);
+                sp = stack.len;
+                if done {
+                    break 'pop;
                 }
                 tfar_max = hmax(*tfar);
                 continue 'pop;
@@ -710,10 +746,7 @@ pub(crate) fn walk_packet<const ANY: bool, const CONS: bool>(
                 if mask == 0 {
                     continue 'pop;
                 }
-                match order_children::<ANY>(stack, &child, mask, &d) {
-                    Some(next) => cur = next,
-                    None => continue 'pop,
-                }
+                cur = order_children::<ANY>(stack, &mut sp, &child, mask, &d);
                 continue;
             }
             let mut hit_child = [0u32; WIDTH];
@@ -748,17 +781,15 @@ pub(crate) fn walk_packet<const ANY: bool, const CONS: bool>(
                 cur = hit_child[0];
                 continue;
             }
-            let base = stack.len;
+            let first = sp;
             for k in 0..n {
-                stack.push(hit_child[k], hit_dist[k]);
+                stack.put(&mut sp, hit_child[k], hit_dist[k]);
             }
             if !ANY {
-                stack.sort_from(base);
+                stack.sort_from(first, sp);
             }
-            let Some((next, _)) = stack.pop_above(base) else {
-                continue 'pop;
-            };
-            cur = next;
+            cur = stack.take(&mut sp).0;
         }
     }
+    stack.len = base;
 }
