@@ -22,7 +22,7 @@ pub enum Coherence {
     /// towards one light): the stream is traced as packets of [`PACKET_WIDTH`] consecutive rays.
     Coherent,
     /// Rays are unrelated (diffuse bounces): each ray is traced on its own, SIMD over a node's
-    /// children and a leaf's triangles.
+    /// children and a leaf's triangles, in groups of 4096 sorted by direction octant.
     Incoherent,
 }
 
@@ -192,11 +192,45 @@ fn intersect_range<Q: Query + ?Sized>(
             }
         }
         Coherence::Incoherent => {
-            for k in 0..n {
-                if let Some(h) = q.intersect(&rays.get(start + k)) {
+            for_each_by_octant(rays, start, n, |k, r| {
+                if let Some(h) = q.intersect(r) {
                     out.set(k, &h);
                 }
-            }
+            });
+        }
+    }
+}
+
+/// Rays per octant-sorting group of an incoherent stream.
+const OCTANT_GROUP: usize = 4096;
+
+/// Calls `f(k, ray)` for rays `start..start + n`, in groups of [`OCTANT_GROUP`] rays ordered by
+/// their direction's octant (a counting sort), so that consecutive single-ray walks take the same
+/// near planes and similar paths (Embree's stream sorts incoherent rays the same way).
+#[inline(always)]
+fn for_each_by_octant(rays: &RayStream, start: usize, n: usize, mut f: impl FnMut(usize, &Ray)) {
+    let mut order = [0u16; OCTANT_GROUP];
+    let mut oct = [0u8; OCTANT_GROUP];
+    for g in (0..n).step_by(OCTANT_GROUP) {
+        let m = (n - g).min(OCTANT_GROUP);
+        let mut count = [0u16; 9];
+        for i in 0..m {
+            let j = start + g + i;
+            let o = (rays.dx[j] < 0.0) as u8 | (((rays.dy[j] < 0.0) as u8) << 1) | (((rays.dz[j] < 0.0) as u8) << 2);
+            oct[i] = o;
+            count[o as usize + 1] += 1;
+        }
+        for o in 0..8 {
+            count[o + 1] += count[o];
+        }
+        for i in 0..m {
+            let o = oct[i] as usize;
+            order[count[o] as usize] = i as u16;
+            count[o] += 1;
+        }
+        for &i in &order[..m] {
+            let k = g + i as usize;
+            f(k, &rays.get(start + k));
         }
     }
 }
@@ -213,11 +247,7 @@ fn occluded_range<Q: Query + ?Sized>(q: &Q, rays: &RayStream, start: usize, out:
                 }
             }
         }
-        Coherence::Incoherent => {
-            for (k, o) in out.iter_mut().enumerate() {
-                *o = q.occluded(&rays.get(start + k));
-            }
-        }
+        Coherence::Incoherent => for_each_by_octant(rays, start, n, |k, r| out[k] = q.occluded(r)),
     }
 }
 
