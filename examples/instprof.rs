@@ -1,5 +1,6 @@
 //! Profiling aid: traces a scene file's primary rays (packets and single rays) on one thread.
-//! `cargo run --release --example instprof -- data/forest.toml [packet|single|diffuse] [repeats] [flat]`
+//! `cargo run --release --example instprof -- data/forest.toml [packet|single|diffuse|shadow|shadow1] [repeats] [flat]`
+//! (`shadow` traces the shadow rays as packets, `shadow1` one at a time.)
 //! `MAX_LEAF` and `TRAV_COST` override the build settings.
 use std::time::Instant;
 
@@ -24,18 +25,26 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     scene.intersect_stream(&primary, &mut hits, Coherence::Coherent);
     let diag = scene.bounds().map(|(lo, hi)| (hi - lo).length()).unwrap_or(1.0);
     let (diffuse, _) = raygen::diffuse(&primary, &hits, 1, 1e-4 * diag);
+    let light = file.lights.first().map(|l| l.position).unwrap_or(cam.eye + glam::Vec3::Y);
+    let (shadow, _) = raygen::shadow_with(&primary, &hits, light, raygen::Offset::Normal);
     let (rays, coherence) = match mode.as_str() {
         "single" => (&primary, Coherence::Incoherent),
         "diffuse" => (&diffuse, Coherence::Incoherent),
+        "shadow" => (&shadow, Coherence::Coherent),
+        "shadow1" => (&shadow, Coherence::Incoherent),
         _ => (&primary, Coherence::Coherent),
     };
+    let occlusion = mode.starts_with("shadow");
+    let mut occ = Vec::new();
     let flat = if args.iter().any(|a| a == "flat") { Some(scene.flatten(&BuildConfig::default())?) } else { None };
     let mut best = f64::INFINITY;
     for _ in 0..repeats {
         let t = Instant::now();
-        match &flat {
-            Some(f) => f.intersect_stream(rays, &mut hits, coherence),
-            None => scene.intersect_stream(rays, &mut hits, coherence),
+        match (&flat, occlusion) {
+            (Some(f), false) => f.intersect_stream(rays, &mut hits, coherence),
+            (Some(f), true) => f.occluded_stream(rays, &mut occ, coherence),
+            (None, false) => scene.intersect_stream(rays, &mut hits, coherence),
+            (None, true) => scene.occluded_stream(rays, &mut occ, coherence),
         }
         best = best.min(t.elapsed().as_secs_f64());
     }

@@ -7,34 +7,54 @@
 //! that gives the same answers.
 #![allow(unsafe_code)]
 
-use wide::{bytemuck, i32x8};
+use wide::{bytemuck, i32x8, i32x16};
 pub(crate) use wide::{f32x4, f32x8, f32x16};
 
-/// Lane-wise maximum of floats compared as signed integers (one-cycle `vpmaxsd` instead of the
-/// four-cycle `vmaxps`, the trick of Embree's `maxi`). Equal to the float maximum when at least one
-/// operand is a non-negative number; when both are negative it returns one of them. The slab test
-/// takes the maximum with `tnear ≥ +0` last, so its entry distance comes out exact.
-#[inline(always)]
-pub(crate) fn max_bits(a: f32x8, b: f32x8) -> f32x8 {
-    let (a, b): (i32x8, i32x8) = (bytemuck::cast(a), bytemuck::cast(b));
-    bytemuck::cast(a.max(b))
+/// Minima, maxima and `<=` of floats compared as signed integers: one-cycle `vpmaxsd`/`vpminsd`
+/// instead of four-cycle `vmaxps`/`vminps` on the traversal's critical path (Embree's
+/// `maxi`/`mini`). Non-negative floats order like their bit patterns; negative ones order
+/// backwards but below every non-negative one. So:
+/// - `max_bits(a, b)` is the float maximum when at least one operand is a non-negative number; a
+///   slab test whose last maximum takes `tnear ≥ +0` gets exact entry distances;
+/// - `min_bits(a, b)` is the float minimum when both are non-negative, and negative when either
+///   is: a negative exit distance is a miss either way;
+/// - `le_bits(a, b)` is `a <= b` when `a` is non-negative.
+pub(crate) trait BitOrder: Copy {
+    fn max_bits(self, b: Self) -> Self;
+    fn min_bits(self, b: Self) -> Self;
+    fn le_bits(self, b: Self) -> u32;
+    /// `le_bits` as a select mask (all bits set in the lanes where `a <= b`).
+    fn le_mask(self, b: Self) -> Self;
 }
 
-/// Lane-wise minimum as integers: equal to the float minimum when both operands are non-negative,
-/// negative when either is (see [`max_bits`]). A negative exit distance means a miss either way.
-#[inline(always)]
-pub(crate) fn min_bits(a: f32x8, b: f32x8) -> f32x8 {
-    let (a, b): (i32x8, i32x8) = (bytemuck::cast(a), bytemuck::cast(b));
-    bytemuck::cast(a.min(b))
+macro_rules! bit_order {
+    ($f:ty, $i:ty, $lanes:expr) => {
+        impl BitOrder for $f {
+            #[inline(always)]
+            fn max_bits(self, b: Self) -> Self {
+                let (a, b): ($i, $i) = (bytemuck::cast(self), bytemuck::cast(b));
+                bytemuck::cast(a.max(b))
+            }
+            #[inline(always)]
+            fn min_bits(self, b: Self) -> Self {
+                let (a, b): ($i, $i) = (bytemuck::cast(self), bytemuck::cast(b));
+                bytemuck::cast(a.min(b))
+            }
+            #[inline(always)]
+            fn le_bits(self, b: Self) -> u32 {
+                let (a, b): ($i, $i) = (bytemuck::cast(self), bytemuck::cast(b));
+                !a.simd_gt(b).to_bitmask() & low_bits($lanes)
+            }
+            #[inline(always)]
+            fn le_mask(self, b: Self) -> Self {
+                let (a, b): ($i, $i) = (bytemuck::cast(self), bytemuck::cast(b));
+                bytemuck::cast(!a.simd_gt(b))
+            }
+        }
+    };
 }
-
-/// Bit `i` set where `a[i] <= b[i]` compared as integers: the float comparison when `a[i]` is
-/// non-negative.
-#[inline(always)]
-pub(crate) fn le_bits(a: f32x8, b: f32x8) -> u32 {
-    let (a, b): (i32x8, i32x8) = (bytemuck::cast(a), bytemuck::cast(b));
-    !a.simd_gt(b).to_bitmask() & 0xff
-}
+bit_order!(f32x8, i32x8, 8);
+bit_order!(f32x16, i32x16, 16);
 
 /// Lane count of a ray packet (K in Embree's naming): 16 rays, a 4×4 pixel tile.
 pub const PACKET_WIDTH: usize = 16;

@@ -109,3 +109,24 @@ fn mixed_bad_lanes_in_a_packet() {
         }
     }
 }
+
+#[test]
+fn negative_and_signed_zero_tnear_agree_across_apis() {
+    // Packets use integer minima and maxima only when every live lane's tnear is >= 0; camera
+    // packets at -0.0 (frustum), and packets with some lanes reaching behind their origin.
+    let scene = scene_of(vec![strahl::procedural::sphereflake(2, 8, 16)]);
+    let cam = Camera::look_at(Vec3::new(0.0, 0.2, 1.6), Vec3::new(0.0, 0.3, 0.0), Vec3::Y, 60.0);
+    let (primary, _) = raygen::primary(&cam, 64, 48);
+    let with_tnear = |f: &dyn Fn(usize) -> f32| -> RayStream {
+        (0..primary.len()).map(|i| Ray { tnear: f(i), ..primary.get(i) }).collect()
+    };
+    all_apis_agree(&scene, &with_tnear(&|_| -0.0), "tnear -0.0");
+    all_apis_agree(&scene, &with_tnear(&|_| -1.0), "tnear -1");
+    all_apis_agree(&scene, &with_tnear(&|i| if i % 7 == 3 { -0.8 } else { 0.0 }), "some lanes tnear < 0");
+    let random: RayStream = random_rays(12, 3000)
+        .into_iter()
+        .enumerate()
+        .map(|(i, r)| Ray { tnear: -((i % 3) as f32) * 0.4, ..r })
+        .collect();
+    all_apis_agree(&scene, &random, "random rays, tnear 0 / -0.4 / -0.8");
+}

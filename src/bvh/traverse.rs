@@ -259,6 +259,8 @@ struct Frustum {
     tnear: f32x8,
     /// How far apart the rays get per unit of `t`: the largest spread of any direction component.
     spread: f32x8,
+    /// Whether the packet's `tnear` is non-negative: integer minima and maxima (see [`BitOrder`]).
+    int_ok: bool,
 }
 
 /// Inner nodes reached below a node smaller than the packet's footprint carry this bit on the
@@ -283,7 +285,14 @@ impl Frustum {
             rmax: [f32x8::splat(0.0); 3],
             tnear: f32x8::splat(hmin(live_mask.select(tnear, inf))),
             spread: f32x8::splat(0.0),
+            int_ok: false,
         };
+        // `-0.0 + 0.0` is `+0.0`, which orders right as bits.
+        let t0 = f.tnear.to_array()[0];
+        f.int_ok = t0 >= 0.0;
+        if f.int_ok {
+            f.tnear = f32x8::splat(t0 + 0.0);
+        }
         let first = live.trailing_zeros() as usize;
         let mut spread = 0.0f32;
         for a in 0..3 {
@@ -317,20 +326,23 @@ impl Frustum {
     /// Children that some ray of the packet may enter before `tfar_max`, and the lowest entry of each.
     #[inline(always)]
     fn test<const CONS: bool>(&self, b: &[[f32; WIDTH]; 6], tfar_max: f32) -> (u32, [f32; WIDTH]) {
-        let mut tn = self.tnear;
-        let mut tf = f32x8::splat(tfar_max);
-        for a in 0..3 {
-            let pn = f32x8::new(b[self.near[a]]) - self.o[a];
-            let pf = f32x8::new(b[self.far[a]]) - self.o[a];
-            tn = tn.fast_max((pn * self.rmin[a]).fast_min(pn * self.rmax[a]));
-            tf = tf.fast_min((pf * self.rmin[a]).fast_max(pf * self.rmax[a]));
-        }
-        if !CONS {
-            return (tn.simd_le(tf).to_bitmask(), tn.to_array());
-        }
+        let pn = |a: usize| f32x8::new(b[self.near[a]]) - self.o[a];
+        let pf = |a: usize| f32x8::new(b[self.far[a]]) - self.o[a];
+        let (pn, pf) = ([pn(0), pn(1), pn(2)], [pf(0), pf(1), pf(2)]);
+        let tfar = f32x8::splat(tfar_max);
+        let (tn, tf) = if self.int_ok {
+            let n = |a: usize| (pn[a] * self.rmin[a]).min_bits(pn[a] * self.rmax[a]);
+            let f = |a: usize| (pf[a] * self.rmin[a]).max_bits(pf[a] * self.rmax[a]);
+            (n(0).max_bits(n(1)).max_bits(n(2).max_bits(self.tnear)), f(0).min_bits(f(1)).min_bits(f(2).min_bits(tfar)))
+        } else {
+            let n = |a: usize| (pn[a] * self.rmin[a]).fast_min(pn[a] * self.rmax[a]);
+            let f = |a: usize| (pf[a] * self.rmin[a]).fast_max(pf[a] * self.rmax[a]);
+            (n(0).fast_max(n(1)).fast_max(n(2).fast_max(self.tnear)), f(0).fast_min(f(1)).fast_min(f(2).fast_min(tfar)))
+        };
         // Widen by the rounding of the subtraction and product (relative), as in the per-ray test.
-        let slack = (tn.abs() + tf.abs()) * f32x8::splat(WIDEN);
-        (tn.simd_le(tf + slack).to_bitmask(), tn.to_array())
+        let tf = if CONS { tf + (tn.abs() + tf.abs()) * f32x8::splat(WIDEN) } else { tf };
+        let mask = if self.int_ok { tn.le_bits(tf) } else { tn.simd_le(tf).to_bitmask() };
+        (mask, tn.to_array())
     }
 
     /// The children whose largest extent is below the packet's footprint at their entry
@@ -514,7 +526,7 @@ pub(crate) struct BoxRay {
     /// `(widen, pad)` of the conservative test, for the ray's own `tfar`.
     far_scale: (f32, f32),
     /// Whether `tnear ≥ 0`: then the minima and maxima run as integer operations (see
-    /// [`max_bits`]), else as float ones.
+    /// [`BitOrder`]), else as float ones.
     int_ok: bool,
 }
 
@@ -558,9 +570,9 @@ impl BoxRay {
         };
         if self.int_ok {
             // Integer minima and maxima: exact here because `tnear ≥ +0` enters the maximum.
-            let tn = max_bits(max_bits(n0, n1), max_bits(n2, self.tnear));
-            let tf = min_bits(min_bits(f0, f1), min_bits(f2, tf));
-            (le_bits(tn, tf), tn.to_array())
+            let tn = n0.max_bits(n1).max_bits(n2.max_bits(self.tnear));
+            let tf = f0.min_bits(f1).min_bits(f2.min_bits(tf));
+            (tn.le_bits(tf), tn.to_array())
         } else {
             let tn = n0.fast_max(n1).fast_max(n2.fast_max(self.tnear));
             let tf = f0.fast_min(f1).fast_min(f2.fast_min(tf));
@@ -621,6 +633,9 @@ pub(crate) struct PacketBoxes {
     pub tnear: Pf,
     /// The active lanes with valid rays.
     pub live: u32,
+    /// Whether every live lane's `tnear` is non-negative: integer minima and maxima in the per-lane
+    /// tests (see [`BitOrder`]).
+    int_ok: bool,
     frustum: Option<Frustum>,
 }
 
@@ -663,8 +678,12 @@ impl PacketBoxes {
             }
         }
         let tnear = Pf::new(tn_a);
+        // `-0.0 + 0.0` is `+0.0`; lanes out of the query hold `+inf`.
+        let int_ok = tnear.simd_ge(Pf::splat(0.0)).to_bitmask() == low_bits(PACKET_WIDTH);
+        let tnear = if int_ok { tnear + Pf::splat(0.0) } else { tnear };
         let frustum = Frustum::new(&o, &rdir, tnear, live);
-        Some((Self { o, d, rdir, od, pad, widen: Pf::splat(1.0 + WIDEN), tnear, live, frustum }, Pf::new(tf_a)))
+        let widen = Pf::splat(1.0 + WIDEN);
+        Some((Self { o, d, rdir, od, pad, widen, tnear, live, int_ok, frustum }, Pf::new(tf_a)))
     }
 }
 
@@ -673,17 +692,31 @@ impl PacketBoxes {
     /// conservative widening if `CONS`).
     #[inline(always)]
     pub fn lanes_in_box<const CONS: bool>(&self, lo: [f32; 3], hi: [f32; 3], tfar: Pf) -> u32 {
+        self.enter::<CONS>(lo, hi, tfar).0
+    }
+
+    /// The lanes that enter the box `lo..hi` before their `tfar`, and each lane's entry distance
+    /// (`+inf` in the others).
+    #[inline(always)]
+    fn enter<const CONS: bool>(&self, lo: [f32; 3], hi: [f32; 3], tfar: Pf) -> (u32, Pf) {
         let slab = |a: usize| {
             let t0 = Pf::splat(lo[a]).mul_sub(self.rdir[a], self.od[a]);
             let t1 = Pf::splat(hi[a]).mul_sub(self.rdir[a], self.od[a]);
-            (t0.fast_min(t1), t0.fast_max(t1))
+            (t0, t1)
         };
-        let (nx, fx) = slab(0);
-        let (ny, fy) = slab(1);
-        let (nz, fz) = slab(2);
-        let tn = nx.fast_max(ny).fast_max(nz.fast_max(self.tnear));
-        let tf = fx.fast_min(fy).fast_min(fz.fast_min(tfar));
-        if CONS { tn.simd_le(tf.mul_add(self.widen, self.pad)) } else { tn.simd_le(tf) }.to_bitmask()
+        let ((x0, x1), (y0, y1), (z0, z1)) = (slab(0), slab(1), slab(2));
+        let (tn, tf) = if self.int_ok {
+            let tn = x0.min_bits(x1).max_bits(y0.min_bits(y1)).max_bits(z0.min_bits(z1).max_bits(self.tnear));
+            let tf = x0.max_bits(x1).min_bits(y0.max_bits(y1)).min_bits(z0.max_bits(z1).min_bits(tfar));
+            (tn, tf)
+        } else {
+            let tn = x0.fast_min(x1).fast_max(y0.fast_min(y1)).fast_max(z0.fast_min(z1).fast_max(self.tnear));
+            let tf = x0.fast_max(x1).fast_min(y0.fast_max(y1)).fast_min(z0.fast_max(z1).fast_min(tfar));
+            (tn, tf)
+        };
+        let tf = if CONS { tf.mul_add(self.widen, self.pad) } else { tf };
+        let mask = if self.int_ok { tn.le_mask(tf) } else { tn.simd_le(tf) };
+        (mask.to_bitmask(), mask.select(tn, Pf::splat(f32::INFINITY)))
     }
 }
 
@@ -699,7 +732,6 @@ pub(crate) fn walk_packet<const ANY: bool, const CONS: bool>(
     tfar: &mut Pf,
     mut leaf: impl FnMut(u32, &mut Pf, &mut Stack) -> bool,
 ) {
-    let inf = Pf::splat(f32::INFINITY);
     let mut tfar_max = hmax(*tfar);
     let mut sp = stack.len;
     'pop: while sp > base {
@@ -757,20 +789,10 @@ pub(crate) fn walk_packet<const ANY: bool, const CONS: bool>(
                 if c == EMPTY {
                     break;
                 }
-                let slab = |lo: f32, hi: f32, a: usize| {
-                    let t0 = Pf::splat(lo).mul_sub(pb.rdir[a], pb.od[a]);
-                    let t1 = Pf::splat(hi).mul_sub(pb.rdir[a], pb.od[a]);
-                    (t0.fast_min(t1), t0.fast_max(t1))
-                };
-                let (nx, fx) = slab(b[0][i], b[1][i], 0);
-                let (ny, fy) = slab(b[2][i], b[3][i], 1);
-                let (nz, fz) = slab(b[4][i], b[5][i], 2);
-                let tn = nx.fast_max(ny).fast_max(nz.fast_max(pb.tnear));
-                let tf = fx.fast_min(fy).fast_min(fz.fast_min(*tfar));
-                let m = if CONS { tn.simd_le(tf.mul_add(pb.widen, pb.pad)) } else { tn.simd_le(tf) };
-                if m.to_bitmask() != 0 {
+                let (m, tn) = pb.enter::<CONS>([b[0][i], b[2][i], b[4][i]], [b[1][i], b[3][i], b[5][i]], *tfar);
+                if m != 0 {
                     hit_child[n] = if is_leaf(c) { c } else { c | LANE_MODE };
-                    hit_dist[n] = hmin(m.select(tn, inf));
+                    hit_dist[n] = hmin(tn);
                     n += 1;
                 }
             }
