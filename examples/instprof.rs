@@ -1,6 +1,6 @@
 //! Profiling aid: traces a scene file's primary rays (packets and single rays) on one thread.
-//! `cargo run --release --example instprof -- data/forest.toml [packet|single|diffuse|shadow|shadow1] [repeats] [flat]`
-//! (`shadow` traces the shadow rays as packets, `shadow1` one at a time.)
+//! `cargo run --release --example instprof -- data/forest.toml [packet|single|diffuse|diffusep|shadow|shadow1] [repeats] [flat]`
+//! (`shadow` and `diffusep` trace as packets, `shadow1` and `diffuse` one ray at a time.)
 //! `MAX_LEAF` and `TRAV_COST` override the build settings.
 use std::time::Instant;
 
@@ -30,6 +30,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (rays, coherence) = match mode.as_str() {
         "single" => (&primary, Coherence::Incoherent),
         "diffuse" => (&diffuse, Coherence::Incoherent),
+        "diffusep" => (&diffuse, Coherence::Coherent),
         "shadow" => (&shadow, Coherence::Coherent),
         "shadow1" => (&shadow, Coherence::Incoherent),
         _ => (&primary, Coherence::Coherent),

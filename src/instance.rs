@@ -272,10 +272,21 @@ impl InstancedScene {
         ray: &Ray,
         stack: &mut Stack,
     ) -> Option<(u32, LeafHit)> {
+        self.trace1_from::<ANY, K, CONS>(ray, self.root, stack)
+    }
+
+    /// [`trace1_with`](Self::trace1_with) over the instance subtree at `root`.
+    #[inline(always)]
+    fn trace1_from<const ANY: bool, K: Kernel, const CONS: bool>(
+        &self,
+        ray: &Ray,
+        root: u32,
+        stack: &mut Stack,
+    ) -> Option<(u32, LeafHit)> {
         let br = BoxRay::new(ray);
         let mut tfar = ray.tfar;
         let mut best = None;
-        let base = stack.push_root(self.root);
+        let base = stack.push_root(root);
         walk1::<ANY, CONS>(&self.nodes, &br, stack, base, &mut tfar, |leaf, tfar, stack| {
             let (start, count) = leaf_blocks(leaf);
             for k in start..start + count {
@@ -315,7 +326,29 @@ impl InstancedScene {
             return out;
         };
         let base = stack.push_root(self.root);
-        walk_packet::<ANY, CONS>(&self.nodes, &pb, stack, base, &mut tfar, |leaf, tfar, stack| {
+        walk_packet::<ANY, CONS>(&self.nodes, &pb, stack, base, &mut tfar, |leaf, lanes, tfar, stack| {
+            if lanes != 0 {
+                // A few lanes walk this part of the instance tree one at a time.
+                let mut t = tfar.to_array();
+                let mut bits = lanes;
+                while bits != 0 {
+                    let l = bits.trailing_zeros() as usize;
+                    bits &= bits - 1;
+                    let ray = Ray { tfar: t[l], ..p.get(l) };
+                    if let Some((k, h)) = self.trace1_from::<ANY, K, CONS>(&ray, leaf, stack) {
+                        out.mask |= 1 << l;
+                        if ANY {
+                            t[l] = f32::NEG_INFINITY;
+                        } else {
+                            t[l] = h.t;
+                            out.placed[l] = k;
+                            out.hit[l] = Some(h);
+                        }
+                    }
+                }
+                *tfar = Pf::new(t);
+                return ANY && out.mask == pb.live;
+            }
             let (start, count) = leaf_blocks(leaf);
             for k in start..start + count {
                 let pl = &self.placed[k];

@@ -112,6 +112,9 @@ impl Default for PacketHits {
 pub(crate) struct Stack {
     node: [u32; STACK],
     dist: [f32; STACK],
+    /// Packet walks only: the lanes that entered the entry's node (0: the whole packet). Single-ray
+    /// walks leave it stale; each walk pops only the entries it pushed.
+    lanes: [u16; STACK],
     len: usize,
 }
 
@@ -119,14 +122,14 @@ pub(crate) struct Stack {
 /// leaf calls, which may walk an object on the same stack: with the length in the struct, every
 /// push reloaded and stored it (measured below in PERFORMANCE.md).
 impl Stack {
-    const EMPTY: Stack = Stack { node: [0; STACK], dist: [0.0; STACK], len: 0 };
+    const EMPTY: Stack = Stack { node: [0; STACK], dist: [0.0; STACK], lanes: [0; STACK], len: 0 };
 
     /// Pushes `root` and returns the length to walk back down to.
     #[inline(always)]
     pub(crate) fn push_root(&mut self, root: u32) -> usize {
         let base = self.len;
         let mut sp = self.len;
-        self.put(&mut sp, root, f32::NEG_INFINITY);
+        self.put_lanes(&mut sp, root, f32::NEG_INFINITY, 0);
         self.len = sp;
         base
     }
@@ -140,6 +143,19 @@ impl Stack {
         *sp += 1;
     }
 
+    /// [`put`](Self::put) for a packet walk, with the lanes that entered `node` (0: all).
+    #[inline(always)]
+    fn put_lanes(&mut self, sp: &mut usize, node: u32, dist: f32, lanes: u32) {
+        self.lanes[*sp & (STACK - 1)] = lanes as u16;
+        self.put(sp, node, dist);
+    }
+
+    /// The lanes of the entry below `sp` (see [`put_lanes`](Self::put_lanes)).
+    #[inline(always)]
+    fn lanes_at(&self, sp: usize) -> u32 {
+        self.lanes[sp & (STACK - 1)] as u32
+    }
+
     /// Pops the top entry; `sp` must be above zero.
     #[inline(always)]
     fn take(&self, sp: &mut usize) -> (u32, f32) {
@@ -148,20 +164,27 @@ impl Stack {
         (self.node[i], self.dist[i])
     }
 
-    /// Sorts the entries `base..sp` so that the nearest is on top.
+    /// Sorts the entries `base..sp` so that the nearest is on top (with their lane masks if
+    /// `LANES`).
     #[inline(always)]
-    fn sort_from(&mut self, base: usize, sp: usize) {
+    fn sort_from<const LANES: bool>(&mut self, base: usize, sp: usize) {
         const M: usize = STACK - 1;
         for i in base + 1..sp {
-            let (n, d) = (self.node[i & M], self.dist[i & M]);
+            let (n, d, l) = (self.node[i & M], self.dist[i & M], if LANES { self.lanes[i & M] } else { 0 });
             let mut j = i;
             while j > base && self.dist[(j - 1) & M] < d {
                 self.node[j & M] = self.node[(j - 1) & M];
                 self.dist[j & M] = self.dist[(j - 1) & M];
+                if LANES {
+                    self.lanes[j & M] = self.lanes[(j - 1) & M];
+                }
                 j -= 1;
             }
             self.node[j & M] = n;
             self.dist[j & M] = d;
+            if LANES {
+                self.lanes[j & M] = l;
+            }
         }
     }
 }
@@ -239,7 +262,7 @@ fn order_children<const ANY: bool>(
         stack.put(sp, child[i], d[i]);
     }
     if !ANY {
-        stack.sort_from(base, *sp);
+        stack.sort_from::<false>(base, *sp);
     }
     stack.take(sp).0
 }
@@ -419,10 +442,22 @@ impl Bvh {
         ray: &Ray,
         stack: &mut Stack,
     ) -> Option<LeafHit> {
-        if self.root == EMPTY {
+        self.trace1_from::<ANY, K, CONS>(ray, self.root, stack)
+    }
+
+    /// [`trace1_with`](Self::trace1_with) over the subtree at `root` (a node or a leaf): the
+    /// whole tree, or the part a packet hands to its few lanes that enter it.
+    #[inline(always)]
+    pub(crate) fn trace1_from<const ANY: bool, K: Kernel, const CONS: bool>(
+        &self,
+        ray: &Ray,
+        root: u32,
+        stack: &mut Stack,
+    ) -> Option<LeafHit> {
+        if root == EMPTY {
             return None;
         }
-        let base = stack.push_root(self.root);
+        let base = stack.push_root(root);
         let r4 = Ray4::new(ray.origin, ray.dir);
         let pre = K::pre(&r4);
         let br = BoxRay::new(ray);
@@ -467,7 +502,29 @@ impl Bvh {
         };
         let base = stack.push_root(self.root);
         let rk = RayK { o: pb.o, d: pb.d, tnear: pb.tnear };
-        walk_packet::<ANY, CONS>(&self.nodes, &pb, stack, base, &mut tfar, |leaf, tfar, _| {
+        walk_packet::<ANY, CONS>(&self.nodes, &pb, stack, base, &mut tfar, |leaf, lanes, tfar, stack| {
+            if lanes != 0 {
+                // A few lanes walk this subtree one at a time.
+                let mut t = tfar.to_array();
+                let mut bits = lanes;
+                while bits != 0 {
+                    let l = bits.trailing_zeros() as usize;
+                    bits &= bits - 1;
+                    let ray = Ray { tfar: t[l], ..p.get(l) };
+                    if let Some(h) = self.trace1_from::<ANY, K, CONS>(&ray, leaf, stack) {
+                        out.mask |= 1 << l;
+                        if ANY {
+                            t[l] = f32::NEG_INFINITY;
+                        } else {
+                            t[l] = h.t;
+                            (out.t[l], out.u[l], out.v[l], out.block[l], out.lane[l]) =
+                                (h.t, h.u, h.v, h.block, h.lane);
+                        }
+                    }
+                }
+                *tfar = Pf::new(t);
+                return ANY && out.mask == pb.live;
+            }
             let (start, count) = leaf_blocks(leaf);
             let active = pb.tnear.simd_le(*tfar);
             for bi in start..start + count {
@@ -720,9 +777,19 @@ impl PacketBoxes {
     }
 }
 
+/// An inner node entered by this many open lanes or fewer, in a packet without a frustum, is
+/// walked by each lane alone (Embree's single-ray switch in `BVHNIntersectorKHybrid`): a per-lane
+/// node test costs as much for 2 lanes as for 16. Measured on shadow packets (1 thread): big world
+/// 1.9 → 2.8, forest 6.3 → 7.0, Sponza 33 → 30, conference 34 → 33 Mrays/s; thresholds 2 and 8
+/// did no better. Camera packets (with a frustum) and leaves keep the packet form: both lost
+/// 5–10% with the switch.
+const SINGLE_SWITCH: u32 = 4;
+
 /// The ordered depth-first walk of a packet over `nodes`: children tested with the frustum if
-/// the packet has one, per lane otherwise, and entered if any lane enters them. `leaf` as in
-/// [`walk1`], with the lanes' `tfar`.
+/// the packet has one, per lane otherwise, and entered if any lane enters them.
+/// `leaf(reference, lanes, tfar, stack)` is called with `lanes == 0` to test a leaf for the whole
+/// packet, and with the few `lanes` that entered a subtree (a node or a leaf) to walk it one ray
+/// at a time; it may lower the lanes' `tfar` and returns true to end the walk.
 #[inline(always)]
 pub(crate) fn walk_packet<const ANY: bool, const CONS: bool>(
     nodes: &[Node],
@@ -730,19 +797,37 @@ pub(crate) fn walk_packet<const ANY: bool, const CONS: bool>(
     stack: &mut Stack,
     base: usize,
     tfar: &mut Pf,
-    mut leaf: impl FnMut(u32, &mut Pf, &mut Stack) -> bool,
+    mut leaf: impl FnMut(u32, u32, &mut Pf, &mut Stack) -> bool,
 ) {
     let mut tfar_max = hmax(*tfar);
     let mut sp = stack.len;
     'pop: while sp > base {
+        let mut lanes = stack.lanes_at(sp - 1);
         let (mut cur, dist) = stack.take(&mut sp);
         if dist > tfar_max {
             continue;
         }
         loop {
+            if lanes != 0 {
+                // Lanes still open (an occluded lane's interval is closed).
+                let open = lanes & pb.tnear.simd_le(*tfar).to_bitmask();
+                if open == 0 {
+                    continue 'pop;
+                }
+                if pb.frustum.is_none() && open.count_ones() <= SINGLE_SWITCH && !is_leaf(cur) {
+                    stack.len = sp;
+                    let done = leaf(cur & !LANE_MODE, open, tfar, stack);
+                    sp = stack.len;
+                    if done {
+                        break 'pop;
+                    }
+                    tfar_max = hmax(*tfar);
+                    continue 'pop;
+                }
+            }
             if is_leaf(cur) {
                 stack.len = sp;
-                let done = leaf(cur, tfar, stack);
+                let done = leaf(cur, 0, tfar, stack);
                 sp = stack.len;
                 if done {
                     break 'pop;
@@ -778,11 +863,17 @@ pub(crate) fn walk_packet<const ANY: bool, const CONS: bool>(
                 if mask == 0 {
                     continue 'pop;
                 }
+                let first = sp;
                 cur = order_children::<ANY>(stack, &mut sp, &child, mask, &d);
+                for e in first..sp {
+                    stack.lanes[e & (STACK - 1)] = 0;
+                }
+                lanes = 0;
                 continue;
             }
             let mut hit_child = [0u32; WIDTH];
             let mut hit_dist = [0f32; WIDTH];
+            let mut hit_lanes = [0u32; WIDTH];
             let mut n = 0;
             for i in 0..WIDTH {
                 let c = node.child[i];
@@ -793,6 +884,7 @@ pub(crate) fn walk_packet<const ANY: bool, const CONS: bool>(
                 if m != 0 {
                     hit_child[n] = if is_leaf(c) { c } else { c | LANE_MODE };
                     hit_dist[n] = hmin(tn);
+                    hit_lanes[n] = m;
                     n += 1;
                 }
             }
@@ -801,15 +893,17 @@ pub(crate) fn walk_packet<const ANY: bool, const CONS: bool>(
             }
             if n == 1 {
                 cur = hit_child[0];
+                lanes = hit_lanes[0];
                 continue;
             }
             let first = sp;
             for k in 0..n {
-                stack.put(&mut sp, hit_child[k], hit_dist[k]);
+                stack.put_lanes(&mut sp, hit_child[k], hit_dist[k], hit_lanes[k]);
             }
             if !ANY {
-                stack.sort_from(first, sp);
+                stack.sort_from::<true>(first, sp);
             }
+            lanes = stack.lanes_at(sp - 1);
             cur = stack.take(&mut sp).0;
         }
     }
