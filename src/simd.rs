@@ -16,9 +16,10 @@ pub(crate) use wide::{f32x4, f32x8, f32x16};
 /// backwards but below every non-negative one. So:
 /// - `max_bits(a, b)` is the float maximum when at least one operand is a non-negative number; a
 ///   slab test whose last maximum takes `tnear ≥ +0` gets exact entry distances;
-/// - `min_bits(a, b)` is the float minimum when both are non-negative, and negative when either
-///   is: a negative exit distance is a miss either way;
-/// - `le_bits(a, b)` is `a <= b` when `a` is non-negative.
+/// - `min_bits(a, b)` is the float minimum when both are non-negative, and has its sign bit set
+///   when either is negative: a negative exit distance is a miss either way;
+/// - `le_bits(a, b)` is `a <= b` when `a` is non-negative and `b` is not `-0.0` (a box left at
+///   exactly `t = 0` holds no hit in `(tnear ≥ 0, ·]` either way).
 pub(crate) trait BitOrder: Copy {
     fn max_bits(self, b: Self) -> Self;
     fn min_bits(self, b: Self) -> Self;
@@ -174,6 +175,33 @@ mod tests {
         }
         restore_float_mode(old);
         assert_eq!(flush_denormals_enabled(), old & (1 << 15) != 0);
+    }
+
+    #[test]
+    fn bit_order_matches_floats_where_documented() {
+        let vals = [0.0f32, -0.0, 1e-30, 0.5, 3.0, 1e30, f32::INFINITY, -1e-30, -0.5, -3.0, f32::NEG_INFINITY];
+        for &a in &vals {
+            for &b in &vals {
+                let (x, y) = (f32x8::splat(a), f32x8::splat(b));
+                let max = x.max_bits(y).to_array()[0];
+                let min = x.min_bits(y).to_array()[0];
+                if a >= 0.0 && a.is_sign_positive() || b >= 0.0 && b.is_sign_positive() {
+                    assert_eq!(max, a.max(b), "max_bits({a}, {b})");
+                }
+                if a >= 0.0 && b >= 0.0 && a.is_sign_positive() && b.is_sign_positive() {
+                    assert_eq!(min, a.min(b), "min_bits({a}, {b})");
+                }
+                if a < 0.0 || b < 0.0 {
+                    assert!(min.is_sign_negative(), "min_bits({a}, {b}) = {min} must have its sign bit set");
+                }
+                if a.is_sign_positive() && b.to_bits() != (-0.0f32).to_bits() {
+                    assert_eq!(x.le_bits(y) == 0xff, a <= b, "le_bits({a}, {b})");
+                    assert_eq!(f32x16::splat(a).le_bits(f32x16::splat(b)) == 0xffff, a <= b);
+                }
+            }
+        }
+        // `-0.0` is the smallest value as bits: why exit distances stay float in the packet tests.
+        assert_eq!(f32x8::splat(-0.0).min_bits(f32x8::splat(-3.0)).to_array()[0].to_bits(), (-0.0f32).to_bits());
     }
 
     #[test]

@@ -33,9 +33,12 @@ impl Default for Node {
 impl Node {
     /// Sets slot `i` to `child` with bounds `lo..hi`.
     pub fn set(&mut self, i: usize, child: u32, lo: [f32; 3], hi: [f32; 3]) {
+        // `-0.0` becomes `+0.0` (`x + 0.0`): the single-ray slab test's integer minimum treats
+        // `-0.0` as the smallest value, and a `-0.0` bound (an OBJ's "-0.000000") could make it
+        // one (see `BitOrder`).
         for a in 0..3 {
-            self.bounds[2 * a][i] = lo[a];
-            self.bounds[2 * a + 1][i] = hi[a];
+            self.bounds[2 * a][i] = lo[a] + 0.0;
+            self.bounds[2 * a + 1][i] = hi[a] + 0.0;
         }
         self.child[i] = child;
     }

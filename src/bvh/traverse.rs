@@ -353,14 +353,19 @@ impl Frustum {
         let pf = |a: usize| f32x8::new(b[self.far[a]]) - self.o[a];
         let (pn, pf) = ([pn(0), pn(1), pn(2)], [pf(0), pf(1), pf(2)]);
         let tfar = f32x8::splat(tfar_max);
-        let (tn, tf) = if self.int_ok {
+        // Exit distances stay float. A product `+0 · r` with `r < 0` is `-0.0`, the smallest value
+        // as bits: an integer minimum would return it over the true (negative) exit, and every box
+        // with a plane through the packet's origin would be entered (Sibenik's camera sits on such
+        // planes; its primary packets ran at half speed). Entry distances are safe: `-0.0` loses
+        // every integer maximum, and `tnear ≥ +0` enters last.
+        let f = |a: usize| (pf[a] * self.rmin[a]).fast_max(pf[a] * self.rmax[a]);
+        let tf = f(0).fast_min(f(1)).fast_min(f(2).fast_min(tfar));
+        let tn = if self.int_ok {
             let n = |a: usize| (pn[a] * self.rmin[a]).min_bits(pn[a] * self.rmax[a]);
-            let f = |a: usize| (pf[a] * self.rmin[a]).max_bits(pf[a] * self.rmax[a]);
-            (n(0).max_bits(n(1)).max_bits(n(2).max_bits(self.tnear)), f(0).min_bits(f(1)).min_bits(f(2).min_bits(tfar)))
+            n(0).max_bits(n(1)).max_bits(n(2).max_bits(self.tnear))
         } else {
             let n = |a: usize| (pn[a] * self.rmin[a]).fast_min(pn[a] * self.rmax[a]);
-            let f = |a: usize| (pf[a] * self.rmin[a]).fast_max(pf[a] * self.rmax[a]);
-            (n(0).fast_max(n(1)).fast_max(n(2).fast_max(self.tnear)), f(0).fast_min(f(1)).fast_min(f(2).fast_min(tfar)))
+            n(0).fast_max(n(1)).fast_max(n(2).fast_max(self.tnear))
         };
         // Widen by the rounding of the subtraction and product (relative), as in the per-ray test.
         let tf = if CONS { tf + (tn.abs() + tf.abs()) * f32x8::splat(WIDEN) } else { tf };
@@ -763,8 +768,11 @@ impl PacketBoxes {
         };
         let ((x0, x1), (y0, y1), (z0, z1)) = (slab(0), slab(1), slab(2));
         let (tn, tf) = if self.int_ok {
+            // Exit distances stay float: an integer minimum may return `-0.0` or a negative value
+            // nearer to zero than the true exit, which the widening below could lift above zero
+            // (a box behind the ray entered: no wrong answer, only wasted work).
             let tn = x0.min_bits(x1).max_bits(y0.min_bits(y1)).max_bits(z0.min_bits(z1).max_bits(self.tnear));
-            let tf = x0.max_bits(x1).min_bits(y0.max_bits(y1)).min_bits(z0.max_bits(z1).min_bits(tfar));
+            let tf = x0.fast_max(x1).fast_min(y0.fast_max(y1)).fast_min(z0.fast_max(z1).fast_min(tfar));
             (tn, tf)
         } else {
             let tn = x0.fast_min(x1).fast_max(y0.fast_min(y1)).fast_max(z0.fast_min(z1).fast_max(self.tnear));
@@ -800,6 +808,9 @@ pub(crate) fn walk_packet<const ANY: bool, const CONS: bool>(
     mut leaf: impl FnMut(u32, u32, &mut Pf, &mut Stack) -> bool,
 ) {
     let mut tfar_max = hmax(*tfar);
+    // Camera packets (with a frustum) never switch to single rays; their entries' lane masks are
+    // not kept.
+    let switch = pb.frustum.is_none();
     let mut sp = stack.len;
     'pop: while sp > base {
         let mut lanes = stack.lanes_at(sp - 1);
@@ -808,13 +819,13 @@ pub(crate) fn walk_packet<const ANY: bool, const CONS: bool>(
             continue;
         }
         loop {
-            if lanes != 0 {
+            if switch && lanes != 0 && !is_leaf(cur) {
                 // Lanes still open (an occluded lane's interval is closed).
                 let open = lanes & pb.tnear.simd_le(*tfar).to_bitmask();
                 if open == 0 {
                     continue 'pop;
                 }
-                if pb.frustum.is_none() && open.count_ones() <= SINGLE_SWITCH && !is_leaf(cur) {
+                if open.count_ones() <= SINGLE_SWITCH {
                     stack.len = sp;
                     let done = leaf(cur & !LANE_MODE, open, tfar, stack);
                     sp = stack.len;
@@ -863,11 +874,7 @@ pub(crate) fn walk_packet<const ANY: bool, const CONS: bool>(
                 if mask == 0 {
                     continue 'pop;
                 }
-                let first = sp;
                 cur = order_children::<ANY>(stack, &mut sp, &child, mask, &d);
-                for e in first..sp {
-                    stack.lanes[e & (STACK - 1)] = 0;
-                }
                 lanes = 0;
                 continue;
             }
