@@ -110,7 +110,9 @@ impl Bvh {
         let tree = build::build(&mut prims, cfg);
 
         // Flatten depth-first: nodes and block ranges serially (cheap), then the triangle blocks
-        // of all leaves in parallel (each gathers scattered vertices, the costly part).
+        // of all leaves in parallel (each gathers scattered vertices, the costly part). An indexed
+        // collect writes the blocks straight into their vector: igea's blocks took 7–12 ms
+        // through per-leaf iterators and 3–5 ms this way.
         let mut nodes = Vec::new();
         let mut leaves = Vec::new();
         let (root, bounds) = match &tree {
@@ -121,23 +123,28 @@ impl Bvh {
                 (r, Some((Vec3::from(b.lo), Vec3::from(b.hi))))
             }
         };
-        let prims_ref = &prims;
-        let make_blocks = |&(start, count): &(usize, usize)| {
-            prims_ref[start..start + count].chunks(BLOCK).map(|chunk| {
-                let mut tris = [(0u32, 0u32, [Vec3::ZERO; 3]); BLOCK];
-                for (slot, p) in tris.iter_mut().zip(chunk) {
-                    let id = p.id() as usize;
-                    let g = offsets.partition_point(|&o| o <= id) - 1;
-                    let local = id - offsets[g];
-                    *slot = (g as u32, local as u32, meshes[g].triangle(local));
-                }
-                TriBlock::new(cfg.triangle_test, &tris[..chunk.len()])
+        // One entry per block, `(first primitive, primitives)`, so that the blocks are filled by an
+        // indexed parallel collect straight into their final vector.
+        let sources: Vec<(usize, usize)> = leaves
+            .iter()
+            .flat_map(|&(start, count)| {
+                (start..start + count).step_by(BLOCK).map(move |s| (s, (start + count - s).min(BLOCK)))
             })
+            .collect();
+        let make_block = |&(start, n): &(usize, usize)| {
+            let mut tris = [(0u32, 0u32, [Vec3::ZERO; 3]); BLOCK];
+            for (slot, p) in tris.iter_mut().zip(&prims[start..start + n]) {
+                let id = p.id() as usize;
+                let g = offsets.partition_point(|&o| o <= id) - 1;
+                let local = id - offsets[g];
+                *slot = (g as u32, local as u32, meshes[g].triangle(local));
+            }
+            TriBlock::new(cfg.triangle_test, &tris[..n])
         };
         let blocks: Vec<TriBlock> = if parallel {
-            leaves.par_iter().flat_map_iter(make_blocks).collect()
+            sources.par_iter().with_min_len(256).map(make_block).collect()
         } else {
-            leaves.iter().flat_map(make_blocks).collect()
+            sources.iter().map(make_block).collect()
         };
         let mut bvh = Bvh {
             nodes,
