@@ -20,7 +20,9 @@ use glam::{Affine3A, Mat3A, Vec3, Vec3A};
 
 use crate::bvh::build::{self, Aabb, BuildNode, PrimRef};
 use crate::bvh::node::{EMPTY, MAX_BLOCK_INDEX, Node, leaf_blocks, leaf_ref};
-use crate::bvh::traverse::{BoxRay, LeafHit, PacketBoxes, Stack, dispatch, walk_packet, walk1, with_stack};
+use crate::bvh::traverse::{
+    BoxRay, LeafHit, PacketBoxes, Stack, dispatch, each_lane_alone, walk_packet, walk1, with_stack,
+};
 use crate::bvh::{BoxTest, BuildConfig};
 use crate::error::{Error, Result};
 use crate::geometry::TriangleTest;
@@ -329,24 +331,19 @@ impl InstancedScene {
         walk_packet::<ANY, CONS>(&self.nodes, &pb, stack, base, &mut tfar, |leaf, lanes, tfar, stack| {
             if lanes != 0 {
                 // A few lanes walk this part of the instance tree one at a time.
-                let mut t = tfar.to_array();
-                let mut bits = lanes;
-                while bits != 0 {
-                    let l = bits.trailing_zeros() as usize;
-                    bits &= bits - 1;
-                    let ray = Ray { tfar: t[l], ..p.get(l) };
-                    if let Some((k, h)) = self.trace1_from::<ANY, K, CONS>(&ray, leaf, stack) {
-                        out.mask |= 1 << l;
-                        if ANY {
-                            t[l] = f32::NEG_INFINITY;
-                        } else {
-                            t[l] = h.t;
-                            out.placed[l] = k;
-                            out.hit[l] = Some(h);
-                        }
-                    }
-                }
-                *tfar = Pf::new(t);
+                out.mask |= each_lane_alone::<ANY, _>(
+                    p,
+                    lanes,
+                    tfar,
+                    |ray| {
+                        let (k, h) = self.trace1_from::<ANY, K, CONS>(ray, leaf, stack)?;
+                        Some((h.t, (k, h)))
+                    },
+                    |l, (k, h)| {
+                        out.placed[l] = k;
+                        out.hit[l] = Some(h);
+                    },
+                );
                 return ANY && out.mask == pb.live;
             }
             let (start, count) = leaf_blocks(leaf);

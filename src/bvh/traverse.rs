@@ -510,24 +510,16 @@ impl Bvh {
         walk_packet::<ANY, CONS>(&self.nodes, &pb, stack, base, &mut tfar, |leaf, lanes, tfar, stack| {
             if lanes != 0 {
                 // A few lanes walk this subtree one at a time.
-                let mut t = tfar.to_array();
-                let mut bits = lanes;
-                while bits != 0 {
-                    let l = bits.trailing_zeros() as usize;
-                    bits &= bits - 1;
-                    let ray = Ray { tfar: t[l], ..p.get(l) };
-                    if let Some(h) = self.trace1_from::<ANY, K, CONS>(&ray, leaf, stack) {
-                        out.mask |= 1 << l;
-                        if ANY {
-                            t[l] = f32::NEG_INFINITY;
-                        } else {
-                            t[l] = h.t;
-                            (out.t[l], out.u[l], out.v[l], out.block[l], out.lane[l]) =
-                                (h.t, h.u, h.v, h.block, h.lane);
-                        }
-                    }
-                }
-                *tfar = Pf::new(t);
+                out.mask |= each_lane_alone::<ANY, _>(
+                    p,
+                    lanes,
+                    tfar,
+                    |ray| {
+                        let h = self.trace1_from::<ANY, K, CONS>(ray, leaf, stack)?;
+                        Some((h.t, h))
+                    },
+                    |l, h| (out.t[l], out.u[l], out.v[l], out.block[l], out.lane[l]) = (h.t, h.u, h.v, h.block, h.lane),
+                );
                 return ANY && out.mask == pb.live;
             }
             let (start, count) = leaf_blocks(leaf);
@@ -783,6 +775,37 @@ impl PacketBoxes {
         let mask = if self.int_ok { tn.le_mask(tf) } else { tn.simd_le(tf) };
         (mask.to_bitmask(), mask.select(tn, Pf::splat(f32::INFINITY)))
     }
+}
+
+/// Walks the `lanes` of packet `p` one ray at a time: `walk(ray)` with the lane's current `tfar`
+/// returns a hit and its `t`. A hit closes the lane's interval (`ANY`) or lowers its `tfar` to
+/// `t`, and is handed to `record(lane, hit)` (closest hit only). Returns the lanes that hit. The
+/// packet walks' leaf closures use it for the subtrees they hand to single rays.
+#[inline(always)]
+pub(crate) fn each_lane_alone<const ANY: bool, H>(
+    p: &RayPacket,
+    lanes: u32,
+    tfar: &mut Pf,
+    mut walk: impl FnMut(&Ray) -> Option<(f32, H)>,
+    mut record: impl FnMut(usize, H),
+) -> u32 {
+    let mut t = tfar.to_array();
+    let (mut bits, mut hits) = (lanes, 0);
+    while bits != 0 {
+        let l = bits.trailing_zeros() as usize;
+        bits &= bits - 1;
+        if let Some((th, h)) = walk(&Ray { tfar: t[l], ..p.get(l) }) {
+            hits |= 1 << l;
+            if ANY {
+                t[l] = f32::NEG_INFINITY;
+            } else {
+                t[l] = th;
+                record(l, h);
+            }
+        }
+    }
+    *tfar = Pf::new(t);
+    hits
 }
 
 /// An inner node entered by this many open lanes or fewer, in a packet without a frustum, is
