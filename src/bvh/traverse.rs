@@ -112,8 +112,9 @@ impl Default for PacketHits {
 pub(crate) struct Stack {
     node: [u32; STACK],
     dist: [f32; STACK],
-    /// Packet walks only: the lanes that entered the entry's node (0: the whole packet). Single-ray
-    /// walks leave it stale; each walk pops only the entries it pushed.
+    /// Packet walks without a frustum only: the lanes that entered the entry's node (0: the whole
+    /// packet). Single-ray walks and camera packets leave it stale and never read it; each walk
+    /// pops only the entries it pushed.
     lanes: [u16; STACK],
     len: usize,
 }
