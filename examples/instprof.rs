@@ -29,7 +29,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             best = best.min(t.elapsed().as_secs_f64());
             std::hint::black_box(s);
         }
-        println!("build: {:.1} ms (best of {repeats})", best * 1e3);
+        let st = strahl::Scene::build(meshes.clone(), &cfg)?.stats().clone();
+        println!("build: {:.1} ms (best of {repeats}), SAH {:.3}", best * 1e3, st.sah);
         return Ok(());
     }
     let scene = file.build(&cfg)?;
