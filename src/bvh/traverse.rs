@@ -760,17 +760,14 @@ impl PacketBoxes {
             (t0, t1)
         };
         let ((x0, x1), (y0, y1), (z0, z1)) = (slab(0), slab(1), slab(2));
-        let (tn, tf) = if self.int_ok {
-            // Exit distances stay float: an integer minimum may return `-0.0` or a negative value
-            // nearer to zero than the true exit, which the widening below could lift above zero
-            // (a box behind the ray entered: no wrong answer, only wasted work).
-            let tn = x0.min_bits(x1).max_bits(y0.min_bits(y1)).max_bits(z0.min_bits(z1).max_bits(self.tnear));
-            let tf = x0.fast_max(x1).fast_min(y0.fast_max(y1)).fast_min(z0.fast_max(z1).fast_min(tfar));
-            (tn, tf)
+        // Exit distances stay float: an integer minimum may return `-0.0` or a negative value
+        // nearer to zero than the true exit, which the widening below could lift above zero (a
+        // box behind the ray entered: no wrong answer, only wasted work).
+        let tf = x0.fast_max(x1).fast_min(y0.fast_max(y1)).fast_min(z0.fast_max(z1).fast_min(tfar));
+        let tn = if self.int_ok {
+            x0.min_bits(x1).max_bits(y0.min_bits(y1)).max_bits(z0.min_bits(z1).max_bits(self.tnear))
         } else {
-            let tn = x0.fast_min(x1).fast_max(y0.fast_min(y1)).fast_max(z0.fast_min(z1).fast_max(self.tnear));
-            let tf = x0.fast_max(x1).fast_min(y0.fast_max(y1)).fast_min(z0.fast_max(z1).fast_min(tfar));
-            (tn, tf)
+            x0.fast_min(x1).fast_max(y0.fast_min(y1)).fast_max(z0.fast_min(z1).fast_max(self.tnear))
         };
         let tf = if CONS { tf.mul_add(self.widen, self.pad) } else { tf };
         let mask = if self.int_ok { tn.le_mask(tf) } else { tn.simd_le(tf) };
@@ -843,26 +840,23 @@ pub(crate) fn walk_packet<const ANY: bool, const CONS: bool>(
             continue;
         }
         loop {
+            // An inner node few open lanes entered goes to single rays (an occluded lane's
+            // interval is closed); a leaf is tested for the whole packet.
+            let mut single = 0;
             if switch && lanes != 0 && !is_leaf(cur) {
-                // Lanes still open (an occluded lane's interval is closed).
                 let open = lanes & pb.tnear.simd_le(*tfar).to_bitmask();
                 if open == 0 {
                     continue 'pop;
                 }
                 if open.count_ones() <= SINGLE_SWITCH {
-                    stack.len = sp;
-                    let done = leaf(cur & !LANE_MODE, open, tfar, stack);
-                    sp = stack.len;
-                    if done {
-                        break 'pop;
-                    }
-                    tfar_max = hmax(*tfar);
-                    continue 'pop;
+                    single = open;
                 }
             }
-            if is_leaf(cur) {
+            if single != 0 || is_leaf(cur) {
+                // Leaf references use bit 30 for their block count; only nodes carry `LANE_MODE`.
+                let r = if is_leaf(cur) { cur } else { cur & !LANE_MODE };
                 stack.len = sp;
-                let done = leaf(cur, 0, tfar, stack);
+                let done = leaf(r, single, tfar, stack);
                 sp = stack.len;
                 if done {
                     break 'pop;
