@@ -36,16 +36,21 @@ impl Camera {
     }
 }
 
-/// Pixel coordinates of a `w × h` image in 4×4-tile order: tiles row by row, pixels within a
-/// tile row by row. Sixteen consecutive entries form one packet. Pixels of partial tiles at the
-/// right and bottom edges are listed too, so every pixel appears exactly once.
+/// Pixel coordinates of a `w × h` image in 4×4-tile order: 8×8 blocks row by row, the four 4×4
+/// tiles of a block row by row, pixels within a tile row by row. Sixteen consecutive entries form
+/// one packet, and 64 one block (a [`GROUP`](crate::GROUP) of packets). Pixels of partial
+/// tiles at the right and bottom edges are listed too, so every pixel appears exactly once.
 pub fn tile_order(w: u32, h: u32) -> Vec<(u32, u32)> {
     let mut out = Vec::with_capacity(w as usize * h as usize);
-    for ty in (0..h).step_by(4) {
-        for tx in (0..w).step_by(4) {
-            for y in ty..(ty + 4).min(h) {
-                for x in tx..(tx + 4).min(w) {
-                    out.push((x, y));
+    for by in (0..h).step_by(8) {
+        for bx in (0..w).step_by(8) {
+            for ty in (by..(by + 8).min(h)).step_by(4) {
+                for tx in (bx..(bx + 8).min(w)).step_by(4) {
+                    for y in ty..(ty + 4).min(h) {
+                        for x in tx..(tx + 4).min(w) {
+                            out.push((x, y));
+                        }
+                    }
                 }
             }
         }
@@ -72,6 +77,8 @@ mod tests {
         let mut o = tile_order(10, 7);
         assert_eq!(o.len(), 70);
         assert_eq!(&o[..4], &[(0, 0), (1, 0), (2, 0), (3, 0)]);
+        // The second tile is the one to the right, the third the one below the first.
+        assert_eq!((o[16], o[32]), ((4, 0), (0, 4)));
         o.sort_unstable();
         o.dedup();
         assert_eq!(o.len(), 70);

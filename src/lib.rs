@@ -40,6 +40,7 @@ pub mod scene;
 pub mod scene_file;
 pub mod simd;
 
+pub use bvh::group::GROUP;
 pub use bvh::{BoxTest, BuildConfig, BuildStats};
 pub use camera::Camera;
 pub use error::{Error, Result};

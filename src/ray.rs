@@ -309,6 +309,23 @@ impl RayStream {
     /// The rays `start..start + n` (clamped to the stream) as a packet.
     pub fn packet(&self, start: usize, n: usize) -> RayPacket {
         let n = n.min(PACKET_WIDTH).min(self.len().saturating_sub(start));
+        if n == PACKET_WIDTH {
+            // Whole packets as fixed-size copies (vector moves; slices of run-time length went
+            // through `memcpy` calls, a tenth of Cornell's primary stream).
+            let w =
+                |a: &[f32]| -> [f32; PACKET_WIDTH] { a[start..start + PACKET_WIDTH].try_into().unwrap_or_default() };
+            return RayPacket {
+                ox: w(&self.ox),
+                oy: w(&self.oy),
+                oz: w(&self.oz),
+                dx: w(&self.dx),
+                dy: w(&self.dy),
+                dz: w(&self.dz),
+                tnear: w(&self.tnear),
+                tfar: w(&self.tfar),
+                active: crate::simd::low_bits(PACKET_WIDTH),
+            };
+        }
         let mut p = RayPacket::default();
         p.ox[..n].copy_from_slice(&self.ox[start..start + n]);
         p.oy[..n].copy_from_slice(&self.oy[start..start + n]);
@@ -385,6 +402,18 @@ impl HitStream {
         fill(&mut self.ng_z, 0.0);
         for ids in [&mut self.prim_id, &mut self.geom_id, &mut self.inst_id] {
             ids.clear();
+            ids.resize(n, INVALID_ID);
+        }
+    }
+
+    /// Resizes to `n` entries, keeping what the first `n` held: the stream queries clear each
+    /// chunk as they trace it (in parallel and while it is in cache; a serial fill of all nine
+    /// arrays was a tenth of a primary stream's time).
+    pub(crate) fn resize_uncleared(&mut self, n: usize) {
+        for v in [&mut self.t, &mut self.u, &mut self.v, &mut self.ng_x, &mut self.ng_y, &mut self.ng_z] {
+            v.resize(n, 0.0);
+        }
+        for ids in [&mut self.prim_id, &mut self.geom_id, &mut self.inst_id] {
             ids.resize(n, INVALID_ID);
         }
     }

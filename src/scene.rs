@@ -8,6 +8,7 @@ use std::path::Path;
 use glam::Vec3;
 use rayon::prelude::*;
 
+use crate::bvh::group::GROUP;
 use crate::bvh::traverse::LeafHit;
 use crate::bvh::{BoxTest, BuildConfig, BuildStats, Bvh};
 use crate::error::Result;
@@ -106,6 +107,18 @@ impl Query for Scene {
     fn occluded_packet(&self, rays: &RayPacket) -> u32 {
         self.bvh.trace_packet::<true>(rays).mask
     }
+
+    fn intersect_group_each(&self, rays: &[RayPacket; GROUP], mut f: impl FnMut(usize, usize, &Hit)) {
+        for (i, r) in self.bvh.trace_group(rays).iter().enumerate() {
+            let mut bits = r.mask;
+            while bits != 0 {
+                let lane = bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                let h = LeafHit { block: r.block[lane], lane: r.lane[lane], t: r.t[lane], u: r.u[lane], v: r.v[lane] };
+                f(i, lane, &self.bvh.hit_record(&h));
+            }
+        }
+    }
 }
 
 /// The queries every scene answers: closest hit (`intersect*`) and any hit (`occluded*`) for
@@ -126,6 +139,16 @@ pub trait Query: Sync {
     /// Bit mask of the active lanes of `rays` that are occluded.
     fn occluded_packet(&self, rays: &RayPacket) -> u32;
 
+    /// Calls `f(packet, lane, hit)` for every active lane of [`GROUP`] packets that hits something
+    /// (closest hit). The packets of one camera's 8×8 pixel block (four 4×4 tiles, one origin)
+    /// are traced together by flat scenes, with fewer node tests per ray than packet by packet;
+    /// other packets are traced one by one.
+    fn intersect_group_each(&self, rays: &[RayPacket; GROUP], mut f: impl FnMut(usize, usize, &Hit)) {
+        for (i, p) in rays.iter().enumerate() {
+            self.intersect_packet_each(p, |lane, h| f(i, lane, h));
+        }
+    }
+
     /// Closest hits of the active lanes of `rays`; inactive lanes are written as misses.
     fn intersect_packet(&self, rays: &RayPacket, hits: &mut HitPacket) {
         *hits = HitPacket::default();
@@ -134,7 +157,7 @@ pub trait Query: Sync {
 
     /// Closest hits of every ray of a stream; `hits` is resized to the stream's length.
     fn intersect_stream(&self, rays: &RayStream, hits: &mut HitStream, coherence: Coherence) {
-        hits.reset(rays.len());
+        hits.resize_uncleared(rays.len());
         intersect_range(self, rays, 0, HitSlice::of(hits), coherence);
     }
 
@@ -148,7 +171,7 @@ pub trait Query: Sync {
     /// [`intersect_stream`](Self::intersect_stream) spread over the current rayon pool in chunks
     /// of [`STREAM_CHUNK`] rays.
     fn intersect_stream_par(&self, rays: &RayStream, hits: &mut HitStream, coherence: Coherence) {
-        hits.reset(rays.len());
+        hits.resize_uncleared(rays.len());
         let c = STREAM_CHUNK;
         let h = hits;
         (
@@ -184,9 +207,16 @@ fn intersect_range<Q: Query + ?Sized>(
     coherence: Coherence,
 ) {
     let n = out.len();
+    out.clear();
     match coherence {
         Coherence::Coherent => {
-            for k in (0..n).step_by(PACKET_WIDTH) {
+            const G: usize = GROUP * PACKET_WIDTH;
+            let whole = n / G * G;
+            for k in (0..whole).step_by(G) {
+                let ps = std::array::from_fn(|i| rays.packet(start + k + i * PACKET_WIDTH, PACKET_WIDTH));
+                q.intersect_group_each(&ps, |i, lane, h| out.set(k + i * PACKET_WIDTH + lane, h));
+            }
+            for k in (whole..n).step_by(PACKET_WIDTH) {
                 let p = rays.packet(start + k, (n - k).min(PACKET_WIDTH));
                 q.intersect_packet_each(&p, |lane, h| out.set(k + lane, h));
             }
@@ -281,6 +311,17 @@ impl<'a> HitSlice<'a> {
 
     fn len(&self) -> usize {
         self.t.len()
+    }
+
+    /// Marks every entry a miss.
+    fn clear(&mut self) {
+        self.t.fill(f32::INFINITY);
+        for x in [&mut *self.u, &mut *self.v, &mut *self.ng_x, &mut *self.ng_y, &mut *self.ng_z] {
+            x.fill(0.0);
+        }
+        for ids in [&mut *self.prim_id, &mut *self.geom_id, &mut *self.inst_id] {
+            ids.fill(INVALID_ID);
+        }
     }
 
     #[inline]

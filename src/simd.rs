@@ -7,7 +7,8 @@
 //! that gives the same answers.
 #![allow(unsafe_code)]
 
-use wide::{bytemuck, i32x8, i32x16};
+use wide::i32x16;
+pub(crate) use wide::{bytemuck, i32x8};
 pub(crate) use wide::{f32x4, f32x8, f32x16};
 
 /// Minima, maxima and `<=` of floats compared as signed integers: one-cycle `vpmaxsd`/`vpminsd`

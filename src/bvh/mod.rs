@@ -3,6 +3,7 @@
 //! streams ([`traverse`]).
 
 pub mod build;
+pub(crate) mod group;
 pub(crate) mod node;
 pub(crate) mod traverse;
 

@@ -116,7 +116,7 @@ pub(crate) struct Stack {
     /// packet). Single-ray walks and camera packets leave it stale and never read it; each walk
     /// pops only the entries it pushed.
     lanes: [u16; STACK],
-    len: usize,
+    pub(super) len: usize,
 }
 
 /// The walks keep the stack's length in a local `sp` (a register) and store it back only around
@@ -146,20 +146,20 @@ impl Stack {
 
     /// [`put`](Self::put) for a packet walk, with the lanes that entered `node` (0: all).
     #[inline(always)]
-    fn put_lanes(&mut self, sp: &mut usize, node: u32, dist: f32, lanes: u32) {
+    pub(super) fn put_lanes(&mut self, sp: &mut usize, node: u32, dist: f32, lanes: u32) {
         self.lanes[*sp & (STACK - 1)] = lanes as u16;
         self.put(sp, node, dist);
     }
 
     /// The lanes of the entry below `sp` (see [`put_lanes`](Self::put_lanes)).
     #[inline(always)]
-    fn lanes_at(&self, sp: usize) -> u32 {
+    pub(super) fn lanes_at(&self, sp: usize) -> u32 {
         self.lanes[sp & (STACK - 1)] as u32
     }
 
     /// Pops the top entry; `sp` must be above zero.
     #[inline(always)]
-    fn take(&self, sp: &mut usize) -> (u32, f32) {
+    pub(super) fn take(&self, sp: &mut usize) -> (u32, f32) {
         *sp -= 1;
         let i = *sp & (STACK - 1);
         (self.node[i], self.dist[i])
@@ -168,7 +168,7 @@ impl Stack {
     /// Sorts the entries `base..sp` so that the nearest is on top (with their lane masks if
     /// `LANES`).
     #[inline(always)]
-    fn sort_from<const LANES: bool>(&mut self, base: usize, sp: usize) {
+    pub(super) fn sort_from<const LANES: bool>(&mut self, base: usize, sp: usize) {
         const M: usize = STACK - 1;
         for i in base + 1..sp {
             let (n, d, l) = (self.node[i & M], self.dist[i & M], if LANES { self.lanes[i & M] } else { 0 });
@@ -232,7 +232,7 @@ pub(crate) use dispatch;
 /// Descends into the nearest of the children in `mask` (distances `d`) and pushes the others,
 /// nearest on top (in any order for any-hit queries). Returns the child to visit next.
 #[inline(always)]
-fn order_children<const ANY: bool>(
+pub(super) fn order_children<const ANY: bool>(
     stack: &mut Stack,
     sp: &mut usize,
     child: &[u32; WIDTH],
@@ -273,7 +273,8 @@ fn order_children<const ANY: bool>(
 /// at once, 8 wide, with interval arithmetic: the lowest entry and highest exit any ray can have
 /// (Embree's coherent packet traversal with a frustum, `node_intersector_frustum.h`; Reshetov et
 /// al., "Multi-Level Ray Tracing Algorithm", SIGGRAPH 2005).
-struct Frustum {
+#[derive(Clone, Default)]
+pub(super) struct Frustum {
     near: [usize; 3],
     far: [usize; 3],
     /// The shared origin, per axis.
@@ -349,7 +350,7 @@ impl Frustum {
 
     /// Children that some ray of the packet may enter before `tfar_max`, and the lowest entry of each.
     #[inline(always)]
-    fn test<const CONS: bool>(&self, b: &[[f32; WIDTH]; 6], tfar_max: f32) -> (u32, [f32; WIDTH]) {
+    pub(super) fn test<const CONS: bool>(&self, b: &[[f32; WIDTH]; 6], tfar_max: f32) -> (u32, [f32; WIDTH]) {
         let pn = |a: usize| f32x8::new(b[self.near[a]]) - self.o[a];
         let pf = |a: usize| f32x8::new(b[self.far[a]]) - self.o[a];
         let (pn, pf) = ([pn(0), pn(1), pn(2)], [pf(0), pf(1), pf(2)]);
@@ -374,10 +375,61 @@ impl Frustum {
         (mask, tn.to_array())
     }
 
+    /// [`test`](Self::test) with the mask as a select mask and the distances as a vector.
+    #[inline(always)]
+    pub(super) fn test_vec<const CONS: bool>(&self, b: &[[f32; WIDTH]; 6], tfar_max: f32) -> (f32x8, f32x8) {
+        let pn = |a: usize| f32x8::new(b[self.near[a]]) - self.o[a];
+        let pf = |a: usize| f32x8::new(b[self.far[a]]) - self.o[a];
+        let (pn, pf) = ([pn(0), pn(1), pn(2)], [pf(0), pf(1), pf(2)]);
+        let tfar = f32x8::splat(tfar_max);
+        // Exit distances float, entry distances as bits where allowed (see `test`).
+        let f = |a: usize| (pf[a] * self.rmin[a]).fast_max(pf[a] * self.rmax[a]);
+        let tf = f(0).fast_min(f(1)).fast_min(f(2).fast_min(tfar));
+        let tn = if self.int_ok {
+            let n = |a: usize| (pn[a] * self.rmin[a]).min_bits(pn[a] * self.rmax[a]);
+            n(0).max_bits(n(1)).max_bits(n(2).max_bits(self.tnear))
+        } else {
+            let n = |a: usize| (pn[a] * self.rmin[a]).fast_min(pn[a] * self.rmax[a]);
+            n(0).fast_max(n(1)).fast_max(n(2).fast_max(self.tnear))
+        };
+        let tf = if CONS { tf + (tn.abs() + tf.abs()) * f32x8::splat(WIDEN) } else { tf };
+        let mask = if self.int_ok { tn.le_mask(tf) } else { tn.simd_le(tf) };
+        (mask, tn)
+    }
+
+    /// The frustum bounding both `self` and `other`, if they share the origin and octant.
+    pub(super) fn merge(&self, other: &Frustum) -> Option<Frustum> {
+        if self.near != other.near {
+            return None;
+        }
+        let mut spread = 0.0f32;
+        let mut f = Frustum {
+            near: self.near,
+            far: self.far,
+            o: self.o,
+            rmin: self.rmin,
+            rmax: self.rmax,
+            tnear: self.tnear.fast_min(other.tnear),
+            spread: self.spread,
+            int_ok: self.int_ok && other.int_ok,
+        };
+        for a in 0..3 {
+            if self.o[a].to_array()[0] != other.o[a].to_array()[0] {
+                return None;
+            }
+            f.rmin[a] = self.rmin[a].fast_min(other.rmin[a]);
+            f.rmax[a] = self.rmax[a].fast_max(other.rmax[a]);
+            let (rmin, rmax) = (f.rmin[a].to_array()[0], f.rmax[a].to_array()[0]);
+            spread = spread.max((1.0 / rmin - 1.0 / rmax).abs());
+        }
+        f.spread = f32x8::splat(spread * FOOTPRINT_FACTOR);
+        Some(f)
+    }
+
     /// The children whose largest extent is below the packet's footprint at their entry
     /// distance `d`.
     #[inline(always)]
-    fn small(&self, b: &[[f32; WIDTH]; 6], d: &[f32; WIDTH]) -> u32 {
+    pub(super) fn small(&self, b: &[[f32; WIDTH]; 6], d: &[f32; WIDTH]) -> u32 {
         let ext = |a: usize| f32x8::new(b[2 * a + 1]) - f32x8::new(b[2 * a]);
         let e = ext(0).fast_max(ext(1)).fast_max(ext(2));
         e.simd_lt(f32x8::new(*d).abs() * self.spread).to_bitmask()
@@ -523,45 +575,61 @@ impl Bvh {
                 );
                 return ANY && out.mask == pb.live;
             }
-            let (start, count) = leaf_blocks(leaf);
-            let active = pb.tnear.simd_le(*tfar);
-            for bi in start..start + count {
-                let blk = &self.blocks[bi];
-                for lane in 0..BLOCK {
-                    if blk.prim[lane] == u32::MAX {
-                        break;
-                    }
-                    let (valid, t, u, v) = K::intersect_packet(blk, lane, &rk, *tfar, active);
-                    let mut bits = valid.to_bitmask();
-                    if bits == 0 {
-                        continue;
-                    }
-                    if ANY {
-                        // Occluded lanes are finished: close their interval.
-                        out.mask |= bits;
-                        *tfar = valid.select(Pf::splat(f32::NEG_INFINITY), *tfar);
-                        if out.mask == pb.live {
-                            return true;
-                        }
-                        continue;
-                    }
-                    *tfar = valid.select(t, *tfar);
-                    let (t, u, v) = (t.to_array(), u.to_array(), v.to_array());
-                    out.mask |= bits;
-                    while bits != 0 {
-                        let l = bits.trailing_zeros() as usize;
-                        bits &= bits - 1;
-                        out.t[l] = t[l];
-                        out.u[l] = u[l];
-                        out.v[l] = v[l];
-                        out.block[l] = bi as u32;
-                        out.lane[l] = lane as u32;
-                    }
-                }
-            }
-            false
+            self.leaf_packet::<ANY, K>(leaf, &rk, pb.tnear, pb.live, tfar, &mut out)
         });
         out
+    }
+
+    /// Tests the blocks of `leaf` against the open lanes of a packet (`tnear ≤ tfar`): lowers the
+    /// lanes' `tfar` to their hits (closes them, `ANY`) and records the hits in `out`. Returns
+    /// true once every `live` lane is occluded (`ANY`).
+    #[inline(always)]
+    pub(super) fn leaf_packet<const ANY: bool, K: Kernel>(
+        &self,
+        leaf: u32,
+        rk: &RayK,
+        tnear: Pf,
+        live: u32,
+        tfar: &mut Pf,
+        out: &mut PacketHits,
+    ) -> bool {
+        let (start, count) = leaf_blocks(leaf);
+        let active = tnear.simd_le(*tfar);
+        for bi in start..start + count {
+            let blk = &self.blocks[bi];
+            for lane in 0..BLOCK {
+                if blk.prim[lane] == u32::MAX {
+                    break;
+                }
+                let (valid, t, u, v) = K::intersect_packet(blk, lane, rk, *tfar, active);
+                let mut bits = valid.to_bitmask();
+                if bits == 0 {
+                    continue;
+                }
+                if ANY {
+                    // Occluded lanes are finished: close their interval.
+                    out.mask |= bits;
+                    *tfar = valid.select(Pf::splat(f32::NEG_INFINITY), *tfar);
+                    if out.mask == live {
+                        return true;
+                    }
+                    continue;
+                }
+                *tfar = valid.select(t, *tfar);
+                let (t, u, v) = (t.to_array(), u.to_array(), v.to_array());
+                out.mask |= bits;
+                while bits != 0 {
+                    let l = bits.trailing_zeros() as usize;
+                    bits &= bits - 1;
+                    out.t[l] = t[l];
+                    out.u[l] = u[l];
+                    out.v[l] = v[l];
+                    out.block[l] = bi as u32;
+                    out.lane[l] = lane as u32;
+                }
+            }
+        }
+        false
     }
 }
 
@@ -691,7 +759,7 @@ pub(crate) struct PacketBoxes {
     /// Whether every live lane's `tnear` is non-negative: integer minima and maxima in the per-lane
     /// tests (see [`BitOrder`]).
     int_ok: bool,
-    frustum: Option<Frustum>,
+    pub(super) frustum: Option<Frustum>,
 }
 
 impl PacketBoxes {

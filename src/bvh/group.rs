@@ -1,0 +1,195 @@
+//! Coherent groups: [`GROUP`] camera packets (an 8×8 pixel block of 4×4 tiles) traced as one.
+//!
+//! A 16-ray packet pays one frustum test, one stack entry and one child ordering per node for
+//! 16 rays. Near the root every packet of a camera makes the same choices, so a group walks the
+//! upper tree once under the frustum bounding all its packets, and splits only where it must:
+//! below a node smaller than the group's footprint, and at leaves, each packet's own frustum
+//! decides which packets go on (the "packet" bit mask kept on the stack entry, as the hybrid walk
+//! keeps lane masks). Leaves are tested per packet, 16 lanes at a time, with the packet leaf test
+//! of [`Bvh::leaf_packet`]. This is the large-packet, multi-frustum walk of Reshetov et al.
+//! ("Multi-Level Ray Tracing Algorithm", SIGGRAPH 2005) and of Wald et al.'s BVH packets ("Ray
+//! Tracing Deformable Scenes Using Dynamic Bounding Volume Hierarchies", TOG 2007), on Embree's
+//! frustum node test.
+
+use super::Bvh;
+use super::node::{EMPTY, Node, WIDTH, is_leaf};
+use super::traverse::{BoxTest, Frustum, PacketBoxes, PacketHits, Stack, dispatch, with_stack};
+use crate::geometry::badouel::Badouel;
+use crate::geometry::moeller::Moller;
+use crate::geometry::triangle::{Kernel, RayK, TriangleTest};
+use crate::geometry::watertight::Watertight;
+use crate::ray::RayPacket;
+use crate::simd::*;
+
+/// Packets per coherent group: four 4×4 tiles, an 8×8 pixel block.
+pub const GROUP: usize = 4;
+
+/// A stack entry of a group walk with this bit in its lane field is tested per packet; the low
+/// bits name the packets that entered it. Without it, the entry is tested with the group's
+/// frustum for every packet.
+const PER_PACKET: u32 = 1 << 15;
+
+/// The children of `node` that are leaves.
+#[inline(always)]
+fn leaf_children(node: &Node) -> u32 {
+    let c: i32x8 = bytemuck::cast(node.child);
+    (c.is_negative() & !c.simd_eq(i32x8::splat(EMPTY as i32))).to_bitmask()
+}
+
+impl Bvh {
+    /// Closest hits of [`GROUP`] packets traced together (see the module comment). Packets that
+    /// do not share one origin and direction octant are traced one by one.
+    pub(crate) fn trace_group(&self, ps: &[RayPacket; GROUP]) -> [PacketHits; GROUP] {
+        with_stack(|stack| dispatch!(self.test, self.box_test, |K, C| self.trace_group_with::<K, C>(ps, stack)))
+    }
+
+    #[inline(never)]
+    fn trace_group_with<K: Kernel, const CONS: bool>(
+        &self,
+        ps: &[RayPacket; GROUP],
+        stack: &mut Stack,
+    ) -> [PacketHits; GROUP] {
+        let mut out = [PacketHits::default(); GROUP];
+        if self.root == EMPTY {
+            return out;
+        }
+        // Per packet with a live lane: its frustum, triangle-test terms and `tfar`; and the
+        // frustum bounding them all (`None` unless all share one origin and octant).
+        let mut subs = 0u32;
+        let mut sf: [Frustum; GROUP] = Default::default();
+        let mut rk: [RayK; GROUP] = std::array::from_fn(|_| RayK {
+            o: [Pf::splat(0.0); 3],
+            d: [Pf::splat(0.0); 3],
+            tnear: Pf::splat(f32::INFINITY),
+        });
+        let mut live = [0u32; GROUP];
+        let mut tfar = [Pf::splat(f32::NEG_INFINITY); GROUP];
+        let mut group: Option<Frustum> = None;
+        let mut shared = true;
+        for (i, p) in ps.iter().enumerate() {
+            let Some((pb, t)) = PacketBoxes::new(p) else { continue };
+            subs |= 1 << i;
+            group = match (&pb.frustum, &group) {
+                (Some(f), None) => Some(f.clone()),
+                (Some(f), Some(g)) => g.merge(f),
+                (None, _) => None,
+            };
+            shared &= group.is_some();
+            if !shared {
+                break;
+            }
+            sf[i] = pb.frustum.unwrap_or_default();
+            rk[i] = RayK { o: pb.o, d: pb.d, tnear: pb.tnear };
+            live[i] = pb.live;
+            tfar[i] = t;
+        }
+        let (Some(gf), true) = (group, shared) else {
+            for (i, p) in ps.iter().enumerate() {
+                out[i] = self.trace_packet_with::<false, K, CONS>(p, stack);
+            }
+            return out;
+        };
+        let mut tmax: [f32; GROUP] = std::array::from_fn(|i| hmax(tfar[i]));
+        let mut tfar_max = tmax.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b));
+
+        let base = stack.push_root(self.root);
+        let mut sp = stack.len;
+        'pop: while sp > base {
+            let mut lanes = stack.lanes_at(sp - 1);
+            let (mut cur, dist) = stack.take(&mut sp);
+            if dist > tfar_max {
+                continue;
+            }
+            loop {
+                if is_leaf(cur) {
+                    let mut m = if lanes & PER_PACKET != 0 { lanes & subs } else { subs };
+                    while m != 0 {
+                        let s = m.trailing_zeros() as usize;
+                        m &= m - 1;
+                        self.leaf_packet::<false, K>(cur, &rk[s], rk[s].tnear, live[s], &mut tfar[s], &mut out[s]);
+                        tmax[s] = hmax(tfar[s]);
+                    }
+                    tfar_max = tmax.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b));
+                    continue 'pop;
+                }
+                let node = &self.nodes[cur as usize];
+                let b = &node.bounds;
+                let (mut mask, mut d, mut cl);
+                if lanes & PER_PACKET == 0 {
+                    let (gm, gd) = gf.test::<CONS>(b, tfar_max);
+                    if gm == 0 {
+                        continue 'pop;
+                    }
+                    // Leaves, and children smaller than the group's footprint, go per packet.
+                    // (Testing a node with leaves per packet only, without the group's test,
+                    // measured 6% slower on Sponza: the group test rejects whole nodes.)
+                    let fine = (gf.small(b, &gd) | leaf_children(node)) & gm;
+                    mask = gm;
+                    d = gd;
+                    cl = [0u32; WIDTH];
+                    if fine != 0 {
+                        let (pm, pd, pl) = per_packet::<CONS>(&sf, &tmax, subs, b);
+                        mask &= !fine | pm;
+                        let mut f = fine & pm;
+                        while f != 0 {
+                            let i = f.trailing_zeros() as usize;
+                            f &= f - 1;
+                            d[i] = pd[i];
+                            cl[i] = pl[i] as u32 | PER_PACKET;
+                        }
+                    }
+                } else {
+                    let (pm, pd, pl) = per_packet::<CONS>(&sf, &tmax, lanes & subs, b);
+                    mask = pm;
+                    d = pd;
+                    cl = std::array::from_fn(|i| pl[i] as u32 | PER_PACKET);
+                }
+                if mask == 0 {
+                    continue 'pop;
+                }
+                if mask & (mask - 1) == 0 {
+                    let i = mask.trailing_zeros() as usize;
+                    (cur, lanes) = (node.child[i], cl[i]);
+                    continue;
+                }
+                // Descend into the nearest child, push the others nearest on top (with the
+                // packets that enter each: entries pushed without it would read stale bits).
+                let first = sp;
+                while mask != 0 {
+                    let i = mask.trailing_zeros() as usize;
+                    mask &= mask - 1;
+                    stack.put_lanes(&mut sp, node.child[i], d[i], cl[i]);
+                }
+                stack.sort_from::<true>(first, sp);
+                lanes = stack.lanes_at(sp - 1);
+                cur = stack.take(&mut sp).0;
+            }
+        }
+        stack.len = base;
+        out
+    }
+}
+
+/// The children of a node's bounds `b` that the packets in `subs` enter, each packet under its
+/// own frustum and `tmax`: the mask, the lowest entry distance per child, and the packets that
+/// enter each child.
+#[inline(always)]
+fn per_packet<const CONS: bool>(
+    sf: &[Frustum; GROUP],
+    tmax: &[f32; GROUP],
+    subs: u32,
+    b: &[[f32; WIDTH]; 6],
+) -> (u32, [f32; WIDTH], [i32; WIDTH]) {
+    let mut packets = i32x8::splat(0);
+    let mut dist = f32x8::splat(f32::INFINITY);
+    let mut m = subs;
+    while m != 0 {
+        let s = m.trailing_zeros() as usize;
+        m &= m - 1;
+        let (hit, tn) = sf[s].test_vec::<CONS>(b, tmax[s]);
+        packets |= bytemuck::cast::<f32x8, i32x8>(hit) & i32x8::splat(1 << s);
+        dist = hit.select(dist.fast_min(tn), dist);
+    }
+    let mask = (!packets.simd_eq(i32x8::splat(0))).to_bitmask();
+    (mask, dist.to_array(), packets.to_array())
+}
