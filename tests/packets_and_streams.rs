@@ -130,3 +130,59 @@ fn negative_and_signed_zero_tnear_agree_across_apis() {
         .collect();
     all_apis_agree(&scene, &random, "random rays, tnear 0 / -0.4 / -0.8");
 }
+
+#[test]
+fn coherent_groups_of_mixed_packets() {
+    // A coherent stream traces 64 rays (four packets) as one group when all share an origin and
+    // direction octant, and packet by packet otherwise. Blocks here mix: a second camera's tile
+    // (another origin), a tile with NaN and zero-direction lanes, an all-invalid tile, a tile
+    // looking the other way along x (another octant), and whole blocks of one camera.
+    let scene = scene_of(vec![strahl::procedural::sphereflake(2, 8, 16)]);
+    let a = Camera::look_at(Vec3::new(0.0, 0.2, 1.6), Vec3::new(0.0, 0.3, 0.0), Vec3::Y, 60.0);
+    let b = Camera::look_at(Vec3::new(0.3, 1.0, 1.2), Vec3::new(0.0, 0.3, 0.0), Vec3::Y, 60.0);
+    let (ra, _) = raygen::primary(&a, 64, 64);
+    let (rb, _) = raygen::primary(&b, 64, 64);
+    let mut rays = RayStream::default();
+    for i in 0..ra.len() {
+        let (block, tile, lane) = (i / 64, i / 16 % 4, i % 16);
+        let r = match (block % 5, tile) {
+            (0, 1) => rb.get(i),
+            (1, 2) if lane % 3 == 0 => Ray { dir: Vec3::new(f32::NAN, 0.0, -1.0), ..ra.get(i) },
+            (1, 2) if lane % 3 == 1 => Ray { dir: Vec3::ZERO, ..ra.get(i) },
+            (2, 3) => Ray { dir: Vec3::ZERO, ..ra.get(i) },
+            (3, 0) => Ray { dir: ra.get(i).dir * Vec3::new(-1.0, 1.0, 1.0), ..ra.get(i) },
+            _ => ra.get(i),
+        };
+        rays.push(&r);
+    }
+    all_apis_agree(&scene, &rays, "mixed groups");
+}
+
+#[test]
+fn reused_hit_streams_hold_only_the_new_answers() {
+    // Stream queries clear each chunk as they trace it: a stream reused for rays that all miss,
+    // shorter and longer than before, must hold no hit from the earlier query.
+    let scene = scene_of(vec![strahl::procedural::sphereflake(2, 8, 16)]);
+    let cam = Camera::look_at(Vec3::new(0.0, 0.2, 1.6), Vec3::new(0.0, 0.3, 0.0), Vec3::Y, 60.0);
+    let (rays, _) = raygen::primary(&cam, 96, 96);
+    let away = |n: usize| -> RayStream { (0..n).map(|i| Ray { dir: -rays.get(i % rays.len()).dir, ..rays.get(0) }).collect() };
+    for coherence in [Coherence::Coherent, Coherence::Incoherent] {
+        let mut hits = HitStream::default();
+        scene.intersect_stream_par(&rays, &mut hits, coherence);
+        assert!((0..hits.len()).any(|i| hits.get(i).is_some()));
+        for n in [rays.len() / 3, rays.len(), rays.len() + 777] {
+            scene.intersect_stream_par(&rays, &mut hits, coherence);
+            let misses = away(n);
+            scene.intersect_stream_par(&misses, &mut hits, coherence);
+            assert_eq!(hits.len(), n);
+            for i in 0..n {
+                assert_same_hit(hits.get(i), scene.intersect(&misses.get(i)), 0.0, &format!("{coherence:?} ray {i} of {n}"));
+                assert_eq!(hits.t[i], f32::INFINITY);
+            }
+            let mut serial = HitStream::default();
+            scene.intersect_stream(&rays, &mut serial, coherence);
+            scene.intersect_stream(&misses, &mut serial, coherence);
+            assert!((0..n).all(|i| serial.get(i).is_none() && serial.t[i] == f32::INFINITY));
+        }
+    }
+}
