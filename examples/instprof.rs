@@ -1,7 +1,7 @@
 //! Profiling aid: traces a scene file's primary rays (packets and single rays) on one thread.
 //! `cargo run --release --example instprof -- data/forest.toml [packet|single|diffuse|diffusep|shadow|shadow1|build] [repeats] [flat]`
 //! (`shadow` and `diffusep` trace as packets, `shadow1` and `diffuse` one ray at a time.)
-//! `MAX_LEAF` and `TRAV_COST` override the build settings.
+//! `MAX_LEAF`, `TRAV_COST` and `SPLIT` (spatial split factor) override the build settings.
 use std::time::Instant;
 
 use strahl::{BuildConfig, Coherence, HitStream, Query, SceneFile, raygen};
@@ -18,9 +18,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if let Some(v) = std::env::var("TRAV_COST").ok().and_then(|v| v.parse().ok()) {
         cfg.traversal_cost = v;
     }
+    if let Some(v) = std::env::var("SPLIT").ok().and_then(|v| v.parse().ok()) {
+        cfg.split_factor = v;
+    }
     if mode == "build" {
         // Build time of the flat scene (all cores of the rayon pool), best of `repeats`.
-        let meshes: Vec<_> = file.build(&cfg)?.flatten(&cfg)?.meshes().to_vec();
+        let meshes: Vec<_> = file.build(&BuildConfig::default())?.flatten(&BuildConfig::default())?.meshes().to_vec();
         let mut best = f64::INFINITY;
         for _ in 0..repeats {
             let m = meshes.clone();
@@ -29,8 +32,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             best = best.min(t.elapsed().as_secs_f64());
             std::hint::black_box(s);
         }
-        let st = strahl::Scene::build(meshes.clone(), &cfg)?.stats().clone();
-        println!("build: {:.1} ms (best of {repeats}), SAH {:.3}", best * 1e3, st.sah);
+        let m = meshes.clone();
+        let st = strahl::Scene::build(m, &cfg)?.stats().clone();
+        println!(
+            "build: {:.1} ms (best of {repeats}), SAH {:.3}, {} references for {} triangles, {:.1} B/tri",
+            best * 1e3,
+            st.sah,
+            st.references,
+            st.triangles,
+            st.bytes_per_triangle
+        );
         return Ok(());
     }
     let scene = file.build(&cfg)?;
@@ -52,7 +63,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let occlusion = mode.starts_with("shadow");
     let mut occ = Vec::new();
-    let flat = if args.iter().any(|a| a == "flat") { Some(scene.flatten(&BuildConfig::default())?) } else { None };
+    let flat = if args.iter().any(|a| a == "flat") { Some(scene.flatten(&cfg)?) } else { None };
     let mut best = f64::INFINITY;
     for _ in 0..repeats {
         let t = Instant::now();

@@ -38,6 +38,7 @@ fn every_build_preset_matches_brute_force() {
     for cfg in [
         BuildConfig::default(),
         BuildConfig::fast(),
+        BuildConfig::high(),
         BuildConfig { min_leaf: 1, max_leaf: 1, ..BuildConfig::default() },
         BuildConfig { max_leaf: 60, ..BuildConfig::default() },
         BuildConfig { parallel_threshold: 64, ..BuildConfig::default() },
@@ -185,6 +186,52 @@ fn negative_and_signed_zero_tnear_match_brute_force() {
                 let hits = check_scene(&scene, &rays, &format!("{test:?} {boxes:?} ({tnear}, {tfar})"));
                 assert!(hits > 10, "{test:?} ({tnear}, {tfar}): {hits} hits");
             }
+        }
+    }
+}
+
+#[test]
+fn spatial_splits_match_brute_force() {
+    // Long thin triangles across the scene make spatial splits worth it: each is referenced on
+    // several sides of the planes that cut it, each reference bounded by its part only. Near the
+    // origin and 1e5 away (the clipped parts' padding must cover the rounding there too).
+    for offset in [0.0f32, 1e5] {
+        let mut rng = strahl::raygen::Pcg32::new(21, 5);
+        let mut p = Vec::new();
+        let mut idx = Vec::new();
+        for i in 0..1500u32 {
+            let a = rng_vec(&mut rng, -1.0, 1.0);
+            let long = rng_vec(&mut rng, -1.5, 1.5);
+            let thin = rng_vec(&mut rng, -0.02, 0.02);
+            let o = Vec3::splat(offset);
+            p.extend([o + a, o + a + long, o + a + long * 0.5 + thin]);
+            idx.push([3 * i, 3 * i + 1, 3 * i + 2]);
+        }
+        let mesh = strahl::TriangleMesh::new("slivers", p, idx).unwrap();
+        let rays: Vec<Ray> =
+            random_rays(22, 3000).into_iter().map(|r| Ray { origin: r.origin + Vec3::splat(offset), ..r }).collect();
+        for (t, b) in TriangleTest::ALL.iter().flat_map(|&t| BoxTest::ALL.map(|b| (t, b))) {
+            // Far from the origin, the fast box test lets rays slip between boxes, and Badouel's
+            // test (plane distance, then projected barycentrics) accepts points up to ~0.01 off
+            // these 0.02-wide slivers, outside any box of the triangle: both fail without spatial
+            // splits too (`far_from_origin_matches_brute_force` has no slivers).
+            if offset != 0.0 && (b == BoxTest::Fast || t == TriangleTest::Badouel) {
+                continue;
+            }
+            let cfg = BuildConfig::high().with_tests(t, b);
+            let scene = Scene::build(vec![mesh.clone()], &cfg).unwrap();
+            let st = scene.stats();
+            assert_eq!(st.triangles + st.skipped_triangles, 1500);
+            assert!(
+                st.references > st.triangles && st.references as f32 <= 1.2 * st.triangles as f32 + 64.0,
+                "spatial splits should copy some references, within the budget: {} of {}",
+                st.references,
+                st.triangles
+            );
+            let plain = Scene::build(vec![mesh.clone()], &BuildConfig::default().with_tests(t, b)).unwrap();
+            assert!(st.sah < plain.stats().sah, "SAH {} with spatial splits vs {} without", st.sah, plain.stats().sah);
+            let hits = check_scene(&scene, &rays, &format!("spatial {t:?} {b:?} offset {offset}"));
+            assert!(hits > 300, "{hits}");
         }
     }
 }

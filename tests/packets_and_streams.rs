@@ -165,7 +165,8 @@ fn reused_hit_streams_hold_only_the_new_answers() {
     let scene = scene_of(vec![strahl::procedural::sphereflake(2, 8, 16)]);
     let cam = Camera::look_at(Vec3::new(0.0, 0.2, 1.6), Vec3::new(0.0, 0.3, 0.0), Vec3::Y, 60.0);
     let (rays, _) = raygen::primary(&cam, 96, 96);
-    let away = |n: usize| -> RayStream { (0..n).map(|i| Ray { dir: -rays.get(i % rays.len()).dir, ..rays.get(0) }).collect() };
+    let away =
+        |n: usize| -> RayStream { (0..n).map(|i| Ray { dir: -rays.get(i % rays.len()).dir, ..rays.get(0) }).collect() };
     for coherence in [Coherence::Coherent, Coherence::Incoherent] {
         let mut hits = HitStream::default();
         scene.intersect_stream_par(&rays, &mut hits, coherence);
@@ -176,7 +177,12 @@ fn reused_hit_streams_hold_only_the_new_answers() {
             scene.intersect_stream_par(&misses, &mut hits, coherence);
             assert_eq!(hits.len(), n);
             for i in 0..n {
-                assert_same_hit(hits.get(i), scene.intersect(&misses.get(i)), 0.0, &format!("{coherence:?} ray {i} of {n}"));
+                assert_same_hit(
+                    hits.get(i),
+                    scene.intersect(&misses.get(i)),
+                    0.0,
+                    &format!("{coherence:?} ray {i} of {n}"),
+                );
                 assert_eq!(hits.t[i], f32::INFINITY);
             }
             let mut serial = HitStream::default();

@@ -5,6 +5,7 @@
 pub mod build;
 pub(crate) mod group;
 pub(crate) mod node;
+mod spatial;
 pub(crate) mod traverse;
 
 use std::time::Instant;
@@ -33,6 +34,8 @@ pub struct BuildStats {
     pub inner_nodes: usize,
     pub leaves: usize,
     pub blocks: usize,
+    /// Triangle references in leaves: `triangles`, plus the copies spatial splits made.
+    pub references: usize,
     /// SAH cost computed as Embree's `BVHNStatistics` does: every inner node costs its half area,
     /// every leaf block its leaf's half area, all relative to the root's half area.
     pub sah: f64,
@@ -108,7 +111,24 @@ impl Bvh {
         if prims.len().div_ceil(BLOCK) > MAX_BLOCK_INDEX {
             return Err(Error::TooManyTriangles(total));
         }
-        let tree = build::build(&mut prims, cfg);
+        let unique = prims.len();
+        let tree = if cfg.split_factor > 1.0 {
+            // Spatial splits need the corners, and return their own reference array.
+            let corners = |id: u32| {
+                let id = id as usize;
+                let g = offsets.partition_point(|&o| o <= id) - 1;
+                meshes[g].triangle(id - offsets[g]).map(Vec3A::from)
+            };
+            spatial::build(std::mem::take(&mut prims), &corners, &cfg.clamped()).map(|(b, node, refs)| {
+                prims = refs;
+                (b, node)
+            })
+        } else {
+            build::build(&mut prims, cfg)
+        };
+        if prims.len().div_ceil(BLOCK) > MAX_BLOCK_INDEX {
+            return Err(Error::TooManyTriangles(total));
+        }
 
         // Flatten depth-first: nodes and block ranges serially (cheap), then the triangle blocks
         // of all leaves in parallel (each gathers scattered vertices, the costly part). An indexed
@@ -157,7 +177,8 @@ impl Bvh {
             stats: BuildStats::default(),
         };
         let build_ms = start.elapsed().as_secs_f64() * 1e3;
-        bvh.stats = bvh.compute_stats(tree.as_ref().map(|t| &t.1), prims.len(), skipped, build_ms);
+        bvh.stats = bvh.compute_stats(tree.as_ref().map(|t| &t.1), unique, skipped, build_ms);
+        bvh.stats.references = prims.len();
         Ok(bvh)
     }
 
