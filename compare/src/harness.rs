@@ -206,6 +206,12 @@ pub struct BuildResult {
     pub strahl_ms: f64,
     pub embree_ms: f64,
     pub embree_high_ms: f64,
+    /// strahl's HIGH preset (spatial splits, `BuildConfig::high`): build time, SAH cost, bytes per
+    /// triangle and leaf references (NaN / 0 for instanced scenes).
+    pub strahl_high_ms: f64,
+    pub strahl_high_sah: f64,
+    pub strahl_high_bytes_per_tri: f64,
+    pub strahl_high_references: usize,
     pub strahl_sah: f64,
     pub strahl_bytes_per_tri: f64,
     pub strahl_bytes: usize,
@@ -213,10 +219,11 @@ pub struct BuildResult {
     pub strahl_leaves: usize,
     pub strahl_depth: usize,
     /// Embree's own statistics (`verbose=2`, read from a child process): SAH cost and BVH bytes
-    /// per triangle at MEDIUM, SAH at HIGH. `None` if they could not be read.
+    /// per triangle at MEDIUM and HIGH. `None` if they could not be read.
     pub embree_bytes_per_tri: Option<f64>,
     pub embree_sah: Option<f64>,
     pub embree_high_sah: Option<f64>,
+    pub embree_high_bytes_per_tri: Option<f64>,
 }
 
 /// Embree's BVH statistics for a scene, as `[(sah, bytes per primitive)]` for MEDIUM then HIGH:
@@ -355,12 +362,23 @@ pub fn run_scene(
     )?;
     let (escene, embree_ms) =
         best_build(reps, || embree::Scene::build(device, &meshes, embree::Quality::Medium, false), |e| e.build_ms)?;
-    let embree_high_ms = embree::Scene::build(device, &meshes, embree::Quality::High, false)?.build_ms;
+    let (_, embree_high_ms) =
+        best_build(reps, || embree::Scene::build(device, &meshes, embree::Quality::High, false), |e| e.build_ms)?;
+    let (high, strahl_high_ms) = best_build(
+        reps,
+        || Ok(pool.install(|| Scene::build(meshes.clone(), &BuildConfig::high()))?),
+        |s| s.stats().build_ms,
+    )?;
+    let hs = high.stats();
     let st = scene.stats();
     let build = BuildResult {
         strahl_ms,
         embree_ms,
         embree_high_ms,
+        strahl_high_ms,
+        strahl_high_sah: hs.sah,
+        strahl_high_bytes_per_tri: hs.bytes_per_triangle,
+        strahl_high_references: hs.references,
         strahl_sah: st.sah,
         strahl_bytes_per_tri: st.bytes_per_triangle,
         strahl_bytes: st.bytes,
@@ -370,6 +388,7 @@ pub fn run_scene(
         embree_bytes_per_tri: None,
         embree_sah: None,
         embree_high_sah: None,
+        embree_high_bytes_per_tri: None,
     };
     let ((eye, at), light) = spec.view_and_light(scene.bounds());
     let camera = Camera::look_at(eye, at, Vec3::Y, 60.0);
@@ -468,6 +487,10 @@ fn run_instanced(
         strahl_ms,
         embree_ms,
         embree_high_ms: f64::NAN,
+        strahl_high_ms: f64::NAN,
+        strahl_high_sah: f64::NAN,
+        strahl_high_bytes_per_tri: f64::NAN,
+        strahl_high_references: 0,
         strahl_sah: f64::NAN,
         strahl_bytes_per_tri: st.bytes as f64 / st.unique_triangles.max(1) as f64,
         strahl_bytes: st.bytes,
@@ -477,6 +500,7 @@ fn run_instanced(
         embree_bytes_per_tri: None,
         embree_sah: None,
         embree_high_sah: None,
+        embree_high_bytes_per_tri: None,
     };
     let bounds = scene.bounds();
     let camera = match &file.camera {

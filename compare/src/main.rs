@@ -144,6 +144,7 @@ fn main() -> anyhow::Result<()> {
             r.build.embree_sah = Some(stats[0].0);
             r.build.embree_bytes_per_tri = Some(stats[0].1);
             r.build.embree_high_sah = Some(stats[1].0);
+            r.build.embree_high_bytes_per_tri = Some(stats[1].1);
         }
         report::write_image(&args.out.join(format!("{}.png", r.name)), &r.image, r.width)?;
         if let Some(dir) = &args.dump_rays {

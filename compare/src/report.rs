@@ -40,6 +40,8 @@ pub struct SceneJson {
     pub triangles: usize,
     pub build: BuildResult,
     pub build_ratio: f64,
+    /// strahl HIGH over Embree HIGH build time (NaN for instanced scenes).
+    pub high_build_ratio: f64,
     pub instanced: bool,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub instances: Option<usize>,
@@ -114,6 +116,7 @@ pub fn build_report(results: &[SceneResult], threads: usize, width: u32, passes:
             triangles: r.triangles,
             build: r.build.clone(),
             build_ratio: ratio(r.build.strahl_ms, r.build.embree_ms),
+            high_build_ratio: ratio(r.build.strahl_high_ms, r.build.embree_high_ms),
             instanced: r.instanced.is_some(),
             instances: r.instanced.as_ref().map(|i| i.instances),
             instanced_triangles: r.instanced.as_ref().map(|i| i.instanced_triangles),
@@ -258,26 +261,31 @@ pub fn markdown(r: &Report) -> String {
     let _ = writeln!(s, "\n## Build (2 threads, best of repeats)\n");
     let _ = writeln!(
         s,
-        "| scene | triangles | strahl ms | Embree MEDIUM ms | ratio | Embree HIGH ms | SAH strahl / Embree MEDIUM / HIGH | B/tri strahl / Embree | nodes | leaves | depth |"
+        "| scene | triangles | strahl ms | Embree MEDIUM ms | ratio | SAH strahl / Embree MEDIUM | strahl HIGH ms | Embree HIGH ms | HIGH ratio | SAH strahl HIGH / Embree HIGH | B/tri strahl / Embree (MEDIUM), strahl / Embree (HIGH) | nodes | leaves | depth |"
     );
-    let _ = writeln!(s, "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+    let _ = writeln!(s, "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     let opt = |x: Option<f64>| x.map(|v| format!("{v:.1}")).unwrap_or_else(|| "–".into());
     for sc in &r.scenes {
         let b = &sc.build;
         let _ = writeln!(
             s,
-            "| {} | {} | {:.1} | {:.1} | {:.2}× | {:.1} | {:.1} / {} / {} | {:.1} / {} | {} | {} | {} |",
+            "| {} | {} | {:.1} | {:.1} | {:.2}× | {:.1} / {} | {:.1} | {:.1} | {:.2}× | {:.1} / {} | {:.1} / {}, {:.1} / {} | {} | {} | {} |",
             sc.name,
             sc.triangles,
             b.strahl_ms,
             b.embree_ms,
             sc.build_ratio,
-            b.embree_high_ms,
             b.strahl_sah,
             opt(b.embree_sah),
+            b.strahl_high_ms,
+            b.embree_high_ms,
+            sc.high_build_ratio,
+            b.strahl_high_sah,
             opt(b.embree_high_sah),
             b.strahl_bytes_per_tri,
             opt(b.embree_bytes_per_tri),
+            b.strahl_high_bytes_per_tri,
+            opt(b.embree_high_bytes_per_tri),
             b.strahl_inner_nodes,
             b.strahl_leaves,
             b.strahl_depth

@@ -216,7 +216,20 @@ fn best_cut(set: &Set, ctx: &Ctx<'_>) -> Cut {
 /// intersected with `within` (the box of the reference being cut); `None` for a side the
 /// triangle does not reach. One pass over the edges (Embree's `splitPrimitive`): every corner
 /// goes to its side, every crossing point to both.
+#[inline]
 fn split_tri(v: &[Vec3A; 3], axis: usize, plane: f32, within: &Aabb) -> (Option<Aabb>, Option<Aabb>) {
+    split_tri_with::<true>(v, axis, plane, within)
+}
+
+/// [`split_tri`], padded (`PAD`, for references) or not (for binning, which only estimates
+/// costs).
+#[inline(always)]
+fn split_tri_with<const PAD: bool>(
+    v: &[Vec3A; 3],
+    axis: usize,
+    plane: f32,
+    within: &Aabb,
+) -> (Option<Aabb>, Option<Aabb>) {
     let (mut l, mut r) = (Aabb::EMPTY, Aabb::EMPTY);
     for i in 0..3 {
         let (p, q) = (v[i], v[(i + 1) % 3]);
@@ -236,9 +249,12 @@ fn split_tri(v: &[Vec3A; 3], axis: usize, plane: f32, within: &Aabb) -> (Option<
     }
     // Pad across the axis for the rounding of the crossing points (relative to the corners,
     // whose magnitude bounds the error of `p + (q − p)·t`), then keep within the reference.
-    let m = v[0].abs().max(v[1].abs()).max(v[2].abs());
-    let mut pad = (m * CLIP_PAD).max(Vec3A::splat(f32::MIN_POSITIVE));
-    pad[axis] = 0.0;
+    let mut pad = Vec3A::ZERO;
+    if PAD {
+        let m = v[0].abs().max(v[1].abs()).max(v[2].abs());
+        pad = (m * CLIP_PAD).max(Vec3A::splat(f32::MIN_POSITIVE));
+        pad[axis] = 0.0;
+    }
     let fit = |b: Aabb| {
         if b.lo.cmpgt(b.hi).any() {
             return None;
@@ -303,7 +319,7 @@ impl SpatialBins {
                 let mut rest = Some(pb);
                 for b in b0..b1 {
                     let Some(cur) = rest else { break };
-                    let (l, r) = split_tri(v, axis, lo[axis] + (b + 1) as f32 * w[axis], &cur);
+                    let (l, r) = split_tri_with::<false>(v, axis, lo[axis] + (b + 1) as f32 * w[axis], &cur);
                     if let Some(l) = l {
                         self.boxes[axis][b].grow(&l);
                     }
