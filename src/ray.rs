@@ -306,6 +306,21 @@ impl RayStream {
         }
     }
 
+    /// Writes the rays `start..start + PACKET_WIDTH` into `p`, all lanes active (in place: a
+    /// packet returned by value is copied on its way). The rays must exist.
+    pub(crate) fn whole_packet_into(&self, start: usize, p: &mut RayPacket) {
+        let w = |dst: &mut [f32; PACKET_WIDTH], a: &[f32]| dst.copy_from_slice(&a[start..start + PACKET_WIDTH]);
+        w(&mut p.ox, &self.ox);
+        w(&mut p.oy, &self.oy);
+        w(&mut p.oz, &self.oz);
+        w(&mut p.dx, &self.dx);
+        w(&mut p.dy, &self.dy);
+        w(&mut p.dz, &self.dz);
+        w(&mut p.tnear, &self.tnear);
+        w(&mut p.tfar, &self.tfar);
+        p.active = crate::simd::low_bits(PACKET_WIDTH);
+    }
+
     /// The rays `start..start + n` (clamped to the stream) as a packet.
     pub fn packet(&self, start: usize, n: usize) -> RayPacket {
         let n = n.min(PACKET_WIDTH).min(self.len().saturating_sub(start));

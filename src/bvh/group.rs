@@ -39,19 +39,22 @@ fn leaf_children(node: &Node) -> u32 {
 impl Bvh {
     /// Closest hits of [`GROUP`] packets traced together (see the module comment). Packets that
     /// do not share one origin and direction octant are traced one by one.
-    pub(crate) fn trace_group(&self, ps: &[RayPacket; GROUP]) -> [PacketHits; GROUP] {
-        with_stack(|stack| dispatch!(self.test, self.box_test, |K, C| self.trace_group_with::<K, C>(ps, stack)))
+    /// The results go to `out` (an out-parameter: returned by value, the 1.3 KB array was
+    /// copied twice per group).
+    pub(crate) fn trace_group(&self, ps: &[RayPacket; GROUP], out: &mut [PacketHits; GROUP]) {
+        with_stack(|stack| dispatch!(self.test, self.box_test, |K, C| self.trace_group_with::<K, C>(ps, out, stack)))
     }
 
     #[inline(never)]
     fn trace_group_with<K: Kernel, const CONS: bool>(
         &self,
         ps: &[RayPacket; GROUP],
+        out: &mut [PacketHits; GROUP],
         stack: &mut Stack,
-    ) -> [PacketHits; GROUP] {
-        let mut out = [PacketHits::default(); GROUP];
+    ) {
+        *out = [PacketHits::default(); GROUP];
         if self.root == EMPTY {
-            return out;
+            return;
         }
         // Per packet with a live lane: its frustum, triangle-test terms and `tfar`; and the
         // frustum bounding them all (`None` unless all share one origin and octant).
@@ -87,7 +90,7 @@ impl Bvh {
             for (i, p) in ps.iter().enumerate() {
                 out[i] = self.trace_packet_with::<false, K, CONS>(p, stack);
             }
-            return out;
+            return;
         };
         let mut tmax: [f32; GROUP] = std::array::from_fn(|i| hmax(tfar[i]));
         let mut tfar_max = tmax.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b));
@@ -166,7 +169,6 @@ impl Bvh {
             }
         }
         stack.len = base;
-        out
     }
 }
 
