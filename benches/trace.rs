@@ -49,7 +49,11 @@ fn bench_build(c: &mut Criterion) {
     for case in cases() {
         let tris: usize = case.meshes.iter().map(|m| m.triangle_count()).sum();
         g.throughput(Throughput::Elements(tris as u64));
-        g.bench_function(case.name, |b| b.iter(|| Scene::build(case.meshes.clone(), &BuildConfig::default()).unwrap()));
+        for (preset, cfg) in [("medium", BuildConfig::default()), ("high", BuildConfig::high())] {
+            g.bench_function(BenchmarkId::new(case.name, preset), |b| {
+                b.iter(|| Scene::build(case.meshes.clone(), &cfg).unwrap())
+            });
+        }
     }
     g.finish();
 }
