@@ -265,26 +265,28 @@ pub fn markdown(r: &Report) -> String {
     );
     let _ = writeln!(s, "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     let opt = |x: Option<f64>| x.map(|v| format!("{v:.1}")).unwrap_or_else(|| "–".into());
+    // Instanced scenes have no flat SAH or HIGH build: NaN shows as a dash.
+    let num = |x: f64| if x.is_finite() { format!("{x:.1}") } else { "–".into() };
     for sc in &r.scenes {
         let b = &sc.build;
         let _ = writeln!(
             s,
-            "| {} | {} | {:.1} | {:.1} | {:.2}× | {:.1} / {} | {:.1} | {:.1} | {:.2}× | {:.1} / {} | {:.1} / {}, {:.1} / {} | {} | {} | {} |",
+            "| {} | {} | {:.1} | {:.1} | {:.2}× | {} / {} | {} | {} | {} | {} / {} | {:.1} / {}, {} / {} | {} | {} | {} |",
             sc.name,
             sc.triangles,
             b.strahl_ms,
             b.embree_ms,
             sc.build_ratio,
-            b.strahl_sah,
+            num(b.strahl_sah),
             opt(b.embree_sah),
-            b.strahl_high_ms,
-            b.embree_high_ms,
-            sc.high_build_ratio,
-            b.strahl_high_sah,
+            num(b.strahl_high_ms),
+            num(b.embree_high_ms),
+            if b.strahl_high_ms.is_finite() { format!("{:.2}×", sc.high_build_ratio) } else { "–".into() },
+            num(b.strahl_high_sah),
             opt(b.embree_high_sah),
             b.strahl_bytes_per_tri,
             opt(b.embree_bytes_per_tri),
-            b.strahl_high_bytes_per_tri,
+            num(b.strahl_high_bytes_per_tri),
             opt(b.embree_high_bytes_per_tri),
             b.strahl_inner_nodes,
             b.strahl_leaves,
