@@ -1,5 +1,5 @@
 //! Profiling aid: traces a scene file's primary rays (packets and single rays) on one thread.
-//! `cargo run --release --example instprof -- data/forest.toml [packet|single|diffuse|diffusep|shadow|shadow1|build] [repeats] [flat]`
+//! `cargo run --release --example instprof -- data/forest.toml [packet|packet16|single|diffuse|diffusep|shadow|shadow1|build] [repeats] [flat]`
 //! (`shadow` and `diffusep` trace as packets, `shadow1` and `diffuse` one ray at a time.)
 //! `MAX_LEAF`, `TRAV_COST` and `SPLIT` (spatial split factor) override the build settings.
 use std::time::Instant;
@@ -61,6 +61,22 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "shadow1" => (&shadow, Coherence::Incoherent),
         _ => (&primary, Coherence::Coherent),
     };
+    if mode == "packet16" {
+        // The packet API on consecutive packets of 16 camera rays (no groups).
+        let mut hp = strahl::HitPacket::default();
+        let mut best = f64::INFINITY;
+        let flat = scene.flatten(&cfg)?;
+        for _ in 0..repeats {
+            let t = Instant::now();
+            for k in (0..primary.len()).step_by(strahl::PACKET_WIDTH) {
+                flat.intersect_packet(&primary.packet(k, strahl::PACKET_WIDTH), &mut hp);
+                std::hint::black_box(&hp);
+            }
+            best = best.min(t.elapsed().as_secs_f64());
+        }
+        println!("packet16 (flat): {:.2} Mrays/s (1 thread, best of {repeats})", primary.len() as f64 / best / 1e6);
+        return Ok(());
+    }
     let occlusion = mode.starts_with("shadow");
     let mut occ = Vec::new();
     let flat = if args.iter().any(|a| a == "flat") { Some(scene.flatten(&cfg)?) } else { None };

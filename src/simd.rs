@@ -70,6 +70,14 @@ pub(crate) const fn low_bits(n: usize) -> u32 {
     if n >= 32 { u32::MAX } else { (1u32 << n) - 1 }
 }
 
+/// A packet select mask with the lanes of `bits` set.
+#[inline(always)]
+pub(crate) fn lane_mask(bits: u32) -> Pf {
+    const LANE_BITS: [i32; 16] = [1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024, 2048, 4096, 8192, 16384, 32768];
+    let m = i32x16::splat(bits as i32) & i32x16::new(LANE_BITS);
+    bytemuck::cast(!m.simd_eq(i32x16::splat(0)))
+}
+
 /// Smallest lane of a packet vector, by pairwise halving (log₂ 16 = 4 dependent steps instead of
 /// 16). NaN lanes must not occur (callers select +inf for inactive lanes).
 #[inline(always)]
@@ -203,6 +211,13 @@ mod tests {
         }
         // `-0.0` is the smallest value as bits: why exit distances stay float in the packet tests.
         assert_eq!(f32x8::splat(-0.0).min_bits(f32x8::splat(-3.0)).to_array()[0].to_bits(), (-0.0f32).to_bits());
+    }
+
+    #[test]
+    fn lane_mask_sets_exactly_the_given_lanes() {
+        for bits in [0u32, 1, 0x8000, 0xa5a5, 0xffff] {
+            assert_eq!(lane_mask(bits).to_bitmask(), bits);
+        }
     }
 
     #[test]
