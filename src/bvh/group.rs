@@ -46,7 +46,7 @@ impl Bvh {
     }
 
     #[inline(never)]
-    fn trace_group_with<K: Kernel, const CONS: bool>(
+    pub(crate) fn trace_group_with<K: Kernel, const CONS: bool>(
         &self,
         ps: &[RayPacket; GROUP],
         out: &mut [PacketHits; GROUP],
@@ -92,84 +92,114 @@ impl Bvh {
             }
             return;
         };
-        let mut tmax: [f32; GROUP] = std::array::from_fn(|i| hmax(tfar[i]));
-        let mut tfar_max = tmax.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b));
+        walk_group::<CONS>(&self.nodes, self.root, &gf, &sf, subs, &mut tfar, stack, |leaf, m, tfar, _| {
+            let mut m = m;
+            while m != 0 {
+                let s = m.trailing_zeros() as usize;
+                m &= m - 1;
+                self.leaf_packet::<false, K>(leaf, &rk[s], rk[s].tnear, live[s], &mut tfar[s], &mut out[s]);
+            }
+        });
+    }
+}
 
-        let base = stack.push_root(self.root);
-        let mut sp = stack.len;
-        'pop: while sp > base {
-            let mut lanes = stack.lanes_at(sp - 1);
-            let (mut cur, dist) = stack.take(&mut sp);
-            if dist > tfar_max {
+/// The group walk over `nodes` from `root`: the group's frustum `gf` above the leaves, the
+/// packets' own frusta `sf` at leaves and below nodes smaller than the group's footprint (see the
+/// module comment). `leaf(reference, packets, tfar, stack)` tests a leaf for the packets in the
+/// mask, lowering their lanes' `tfar`; it may walk an object on the same stack. Shared by flat
+/// BVHs and the instance level.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub(crate) fn walk_group<const CONS: bool>(
+    nodes: &[Node],
+    root: u32,
+    gf: &Frustum,
+    sf: &[Frustum; GROUP],
+    subs: u32,
+    tfar: &mut [Pf; GROUP],
+    stack: &mut Stack,
+    mut leaf: impl FnMut(u32, u32, &mut [Pf; GROUP], &mut Stack),
+) {
+    let mut tmax: [f32; GROUP] = std::array::from_fn(|i| hmax(tfar[i]));
+    let mut tfar_max = tmax.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b));
+
+    let base = stack.push_root(root);
+    let mut sp = stack.len;
+    'pop: while sp > base {
+        let mut lanes = stack.lanes_at(sp - 1);
+        let (mut cur, dist) = stack.take(&mut sp);
+        if dist > tfar_max {
+            continue;
+        }
+        loop {
+            if is_leaf(cur) {
+                let m = if lanes & PER_PACKET != 0 { lanes & subs } else { subs };
+                stack.len = sp;
+                leaf(cur, m, tfar, stack);
+                sp = stack.len;
+                let mut b = m;
+                while b != 0 {
+                    let s = b.trailing_zeros() as usize;
+                    b &= b - 1;
+                    tmax[s] = hmax(tfar[s]);
+                }
+                tfar_max = tmax.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b));
+                continue 'pop;
+            }
+            let node = &nodes[cur as usize];
+            let b = &node.bounds;
+            let (mut mask, mut d, mut cl);
+            if lanes & PER_PACKET == 0 {
+                let (gm, gd) = gf.test::<CONS>(b, tfar_max);
+                if gm == 0 {
+                    continue 'pop;
+                }
+                // Leaves, and children smaller than the group's footprint, go per packet.
+                // (Testing a node with leaves per packet only, without the group's test,
+                // measured 6% slower on Sponza: the group test rejects whole nodes.)
+                let fine = (gf.small(b, &gd) | leaf_children(node)) & gm;
+                mask = gm;
+                d = gd;
+                cl = [0u32; WIDTH];
+                if fine != 0 {
+                    let (pm, pd, pl) = per_packet::<CONS>(sf, &tmax, subs, b);
+                    mask &= !fine | pm;
+                    let mut f = fine & pm;
+                    while f != 0 {
+                        let i = f.trailing_zeros() as usize;
+                        f &= f - 1;
+                        d[i] = pd[i];
+                        cl[i] = pl[i] as u32 | PER_PACKET;
+                    }
+                }
+            } else {
+                let (pm, pd, pl) = per_packet::<CONS>(sf, &tmax, lanes & subs, b);
+                mask = pm;
+                d = pd;
+                cl = std::array::from_fn(|i| pl[i] as u32 | PER_PACKET);
+            }
+            if mask == 0 {
+                continue 'pop;
+            }
+            if mask & (mask - 1) == 0 {
+                let i = mask.trailing_zeros() as usize;
+                (cur, lanes) = (node.child[i], cl[i]);
                 continue;
             }
-            loop {
-                if is_leaf(cur) {
-                    let mut m = if lanes & PER_PACKET != 0 { lanes & subs } else { subs };
-                    while m != 0 {
-                        let s = m.trailing_zeros() as usize;
-                        m &= m - 1;
-                        self.leaf_packet::<false, K>(cur, &rk[s], rk[s].tnear, live[s], &mut tfar[s], &mut out[s]);
-                        tmax[s] = hmax(tfar[s]);
-                    }
-                    tfar_max = tmax.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b));
-                    continue 'pop;
-                }
-                let node = &self.nodes[cur as usize];
-                let b = &node.bounds;
-                let (mut mask, mut d, mut cl);
-                if lanes & PER_PACKET == 0 {
-                    let (gm, gd) = gf.test::<CONS>(b, tfar_max);
-                    if gm == 0 {
-                        continue 'pop;
-                    }
-                    // Leaves, and children smaller than the group's footprint, go per packet.
-                    // (Testing a node with leaves per packet only, without the group's test,
-                    // measured 6% slower on Sponza: the group test rejects whole nodes.)
-                    let fine = (gf.small(b, &gd) | leaf_children(node)) & gm;
-                    mask = gm;
-                    d = gd;
-                    cl = [0u32; WIDTH];
-                    if fine != 0 {
-                        let (pm, pd, pl) = per_packet::<CONS>(&sf, &tmax, subs, b);
-                        mask &= !fine | pm;
-                        let mut f = fine & pm;
-                        while f != 0 {
-                            let i = f.trailing_zeros() as usize;
-                            f &= f - 1;
-                            d[i] = pd[i];
-                            cl[i] = pl[i] as u32 | PER_PACKET;
-                        }
-                    }
-                } else {
-                    let (pm, pd, pl) = per_packet::<CONS>(&sf, &tmax, lanes & subs, b);
-                    mask = pm;
-                    d = pd;
-                    cl = std::array::from_fn(|i| pl[i] as u32 | PER_PACKET);
-                }
-                if mask == 0 {
-                    continue 'pop;
-                }
-                if mask & (mask - 1) == 0 {
-                    let i = mask.trailing_zeros() as usize;
-                    (cur, lanes) = (node.child[i], cl[i]);
-                    continue;
-                }
-                // Descend into the nearest child, push the others nearest on top (with the
-                // packets that enter each: entries pushed without it would read stale bits).
-                let first = sp;
-                while mask != 0 {
-                    let i = mask.trailing_zeros() as usize;
-                    mask &= mask - 1;
-                    stack.put_lanes(&mut sp, node.child[i], d[i], cl[i]);
-                }
-                stack.sort_from::<true>(first, sp);
-                lanes = stack.lanes_at(sp - 1);
-                cur = stack.take(&mut sp).0;
+            // Descend into the nearest child, push the others nearest on top (with the
+            // packets that enter each: entries pushed without it would read stale bits).
+            let first = sp;
+            while mask != 0 {
+                let i = mask.trailing_zeros() as usize;
+                mask &= mask - 1;
+                stack.put_lanes(&mut sp, node.child[i], d[i], cl[i]);
             }
+            stack.sort_from::<true>(first, sp);
+            lanes = stack.lanes_at(sp - 1);
+            cur = stack.take(&mut sp).0;
         }
-        stack.len = base;
     }
+    stack.len = base;
 }
 
 /// The children of a node's bounds `b` that the packets in `subs` enter, each packet under its

@@ -274,7 +274,7 @@ pub(super) fn order_children<const ANY: bool>(
 /// (Embree's coherent packet traversal with a frustum, `node_intersector_frustum.h`; Reshetov et
 /// al., "Multi-Level Ray Tracing Algorithm", SIGGRAPH 2005).
 #[derive(Clone, Default)]
-pub(super) struct Frustum {
+pub(crate) struct Frustum {
     near: [usize; 3],
     far: [usize; 3],
     /// The shared origin, per axis.
@@ -401,7 +401,7 @@ impl Frustum {
     }
 
     /// The frustum bounding both `self` and `other`, if they share the origin and octant.
-    pub(super) fn merge(&self, other: &Frustum) -> Option<Frustum> {
+    pub(crate) fn merge(&self, other: &Frustum) -> Option<Frustum> {
         if self.near != other.near {
             return None;
         }
@@ -762,7 +762,7 @@ pub(crate) struct PacketBoxes {
     /// Whether every live lane's `tnear` is non-negative: integer minima and maxima in the per-lane
     /// tests (see [`BitOrder`]).
     int_ok: bool,
-    pub(super) frustum: Option<Frustum>,
+    pub(crate) frustum: Option<Frustum>,
 }
 
 impl PacketBoxes {
