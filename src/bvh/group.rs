@@ -29,6 +29,12 @@ pub const GROUP: usize = 4;
 /// frustum for every packet.
 const PER_PACKET: u32 = 1 << 15;
 
+/// With [`PER_PACKET`]: the entry is smaller than the footprint of a packet that enters it, and
+/// each of its packets walks it alone, with the packet walk's per-lane mode (the frusta accept
+/// most such nodes although few rays enter them). Without it, a flattened forest of 13.5 million
+/// triangles ran at 3.8 Mrays/s in groups against 7.4 packet by packet.
+const SOLO: u32 = 1 << 14;
+
 /// The children of `node` that are leaves.
 #[inline(always)]
 fn leaf_children(node: &Node) -> u32 {
@@ -92,12 +98,21 @@ impl Bvh {
             }
             return;
         };
-        walk_group::<CONS>(&self.nodes, self.root, &gf, &sf, subs, &mut tfar, stack, |leaf, m, tfar, _| {
+        walk_group::<CONS>(&self.nodes, self.root, &gf, &sf, subs, &mut tfar, stack, |r, m, solo, tfar, stack| {
             let mut m = m;
             while m != 0 {
                 let s = m.trailing_zeros() as usize;
                 m &= m - 1;
-                self.leaf_packet::<false, K>(leaf, &rk[s], rk[s].tnear, live[s], &mut tfar[s], &mut out[s]);
+                if solo {
+                    // The packet's own walk, with its per-lane mode below its footprint.
+                    let p = RayPacket { tfar: tfar[s].to_array(), active: live[s], ..ps[s] };
+                    self.trace_packet_from::<false, K, CONS>(&p, r, &mut out[s], stack);
+                    let hit = out[s].mask;
+                    tfar[s] =
+                        Pf::new(std::array::from_fn(|l| if hit & (1 << l) != 0 { out[s].t[l] } else { p.tfar[l] }));
+                } else {
+                    self.leaf_packet::<false, K>(r, &rk[s], rk[s].tnear, live[s], &mut tfar[s], &mut out[s]);
+                }
             }
         });
     }
@@ -105,9 +120,9 @@ impl Bvh {
 
 /// The group walk over `nodes` from `root`: the group's frustum `gf` above the leaves, the
 /// packets' own frusta `sf` at leaves and below nodes smaller than the group's footprint (see the
-/// module comment). `leaf(reference, packets, tfar, stack)` tests a leaf for the packets in the
-/// mask, lowering their lanes' `tfar`; it may walk an object on the same stack. Shared by flat
-/// BVHs and the instance level.
+/// module comment). `leaf(reference, packets, solo, tfar, stack)` tests a leaf for the packets in
+/// the mask, lowering their lanes' `tfar`, or with `solo` walks the subtree at `reference` (a node
+/// or leaf smaller than a packet's footprint) for each packet alone; it may use the same stack.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 pub(crate) fn walk_group<const CONS: bool>(
@@ -118,7 +133,7 @@ pub(crate) fn walk_group<const CONS: bool>(
     subs: u32,
     tfar: &mut [Pf; GROUP],
     stack: &mut Stack,
-    mut leaf: impl FnMut(u32, u32, &mut [Pf; GROUP], &mut Stack),
+    mut leaf: impl FnMut(u32, u32, bool, &mut [Pf; GROUP], &mut Stack),
 ) {
     let mut tmax: [f32; GROUP] = std::array::from_fn(|i| hmax(tfar[i]));
     let mut tfar_max = tmax.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b));
@@ -132,10 +147,11 @@ pub(crate) fn walk_group<const CONS: bool>(
             continue;
         }
         loop {
-            if is_leaf(cur) {
+            let solo = lanes & SOLO != 0;
+            if is_leaf(cur) || solo {
                 let m = if lanes & PER_PACKET != 0 { lanes & subs } else { subs };
                 stack.len = sp;
-                leaf(cur, m, tfar, stack);
+                leaf(cur, m, solo, tfar, stack);
                 sp = stack.len;
                 let mut b = m;
                 while b != 0 {
@@ -162,21 +178,24 @@ pub(crate) fn walk_group<const CONS: bool>(
                 d = gd;
                 cl = [0u32; WIDTH];
                 if fine != 0 {
-                    let (pm, pd, pl) = per_packet::<CONS>(sf, &tmax, subs, b);
+                    let (pm, pd, pl, tiny) = per_packet::<CONS>(sf, &tmax, subs, b);
+                    // Leaves stay with the group: each packet tests them anyway.
+                    let tiny = tiny & !leaf_children(node);
                     mask &= !fine | pm;
                     let mut f = fine & pm;
                     while f != 0 {
                         let i = f.trailing_zeros() as usize;
                         f &= f - 1;
                         d[i] = pd[i];
-                        cl[i] = pl[i] as u32 | PER_PACKET;
+                        cl[i] = pl[i] as u32 | PER_PACKET | if tiny & (1 << i) != 0 { SOLO } else { 0 };
                     }
                 }
             } else {
-                let (pm, pd, pl) = per_packet::<CONS>(sf, &tmax, lanes & subs, b);
+                let (pm, pd, pl, tiny) = per_packet::<CONS>(sf, &tmax, lanes & subs, b);
+                let tiny = tiny & !leaf_children(node);
                 mask = pm;
                 d = pd;
-                cl = std::array::from_fn(|i| pl[i] as u32 | PER_PACKET);
+                cl = std::array::from_fn(|i| pl[i] as u32 | PER_PACKET | if tiny & (1 << i) != 0 { SOLO } else { 0 });
             }
             if mask == 0 {
                 continue 'pop;
@@ -203,17 +222,18 @@ pub(crate) fn walk_group<const CONS: bool>(
 }
 
 /// The children of a node's bounds `b` that the packets in `subs` enter, each packet under its
-/// own frustum and `tmax`: the mask, the lowest entry distance per child, and the packets that
-/// enter each child.
+/// own frustum and `tmax`: the mask, the lowest entry distance per child, the packets that enter
+/// each child, and the children smaller than the footprint of a packet that enters them.
 #[inline(always)]
 fn per_packet<const CONS: bool>(
     sf: &[Frustum; GROUP],
     tmax: &[f32; GROUP],
     subs: u32,
     b: &[[f32; WIDTH]; 6],
-) -> (u32, [f32; WIDTH], [i32; WIDTH]) {
+) -> (u32, [f32; WIDTH], [i32; WIDTH], u32) {
     let mut packets = i32x8::splat(0);
     let mut dist = f32x8::splat(f32::INFINITY);
+    let mut tiny = 0u32;
     let mut m = subs;
     while m != 0 {
         let s = m.trailing_zeros() as usize;
@@ -221,7 +241,8 @@ fn per_packet<const CONS: bool>(
         let (hit, tn) = sf[s].test_vec::<CONS>(b, tmax[s]);
         packets |= bytemuck::cast::<f32x8, i32x8>(hit) & i32x8::splat(1 << s);
         dist = hit.select(dist.fast_min(tn), dist);
+        tiny |= sf[s].small(b, &tn.to_array()) & hit.to_bitmask();
     }
     let mask = (!packets.simd_eq(i32x8::splat(0))).to_bitmask();
-    (mask, dist.to_array(), packets.to_array())
+    (mask, dist.to_array(), packets.to_array(), tiny)
 }

@@ -555,13 +555,28 @@ impl Bvh {
         stack: &mut Stack,
     ) -> PacketHits {
         let mut out = PacketHits::default();
-        if self.root == EMPTY {
-            return out;
+        self.trace_packet_from::<ANY, K, CONS>(p, self.root, &mut out, stack);
+        out
+    }
+
+    /// [`trace_packet_with`](Self::trace_packet_with) over the subtree at `root` (a node or a
+    /// leaf), recording in `out` the hits closer than the lanes' `tfar`: the whole tree, or the
+    /// part a coherent group hands to one packet.
+    #[inline(always)]
+    pub(crate) fn trace_packet_from<const ANY: bool, K: Kernel, const CONS: bool>(
+        &self,
+        p: &RayPacket,
+        root: u32,
+        out: &mut PacketHits,
+        stack: &mut Stack,
+    ) {
+        if root == EMPTY {
+            return;
         }
         let Some((pb, mut tfar)) = PacketBoxes::new(p) else {
-            return out;
+            return;
         };
-        let base = stack.push_root(self.root);
+        let base = stack.push_root(root);
         let rk = RayK { o: pb.o, d: pb.d, tnear: pb.tnear };
         walk_packet::<ANY, CONS>(&self.nodes, &pb, stack, base, &mut tfar, |leaf, lanes, tfar, stack| {
             if lanes != 0 {
@@ -578,9 +593,8 @@ impl Bvh {
                 );
                 return ANY && out.mask == pb.live;
             }
-            self.leaf_packet::<ANY, K>(leaf, &rk, pb.tnear, pb.live, tfar, &mut out)
+            self.leaf_packet::<ANY, K>(leaf, &rk, pb.tnear, pb.live, tfar, out)
         });
-        out
     }
 
     /// Tests the blocks of `leaf` against the open lanes of a packet (`tnear ≤ tfar`): lowers the
