@@ -6,10 +6,12 @@
 //! below a node smaller than the group's footprint, and at leaves, each packet's own frustum
 //! decides which packets go on (the "packet" bit mask kept on the stack entry, as the hybrid walk
 //! keeps lane masks). Leaves are tested per packet, 16 lanes at a time, with the packet leaf test
-//! of [`Bvh::leaf_packet`]. This is the large-packet, multi-frustum walk of Reshetov et al.
-//! ("Multi-Level Ray Tracing Algorithm", SIGGRAPH 2005) and of Wald et al.'s BVH packets ("Ray
-//! Tracing Deformable Scenes Using Dynamic Bounding Volume Hierarchies", TOG 2007), on Embree's
-//! frustum node test.
+//! of [`Bvh::leaf_packet`]. Below a node smaller than half of a packet's own footprint, where
+//! even a packet's frustum accepts nodes few of its rays enter, each packet continues with its
+//! own walk and that walk's per-lane mode. This is the large-packet, multi-frustum walk of
+//! Reshetov et al. ("Multi-Level Ray Tracing Algorithm", SIGGRAPH 2005) and of Wald et al.'s BVH
+//! packets ("Ray Tracing Deformable Scenes Using Dynamic Bounding Volume Hierarchies", TOG 2007),
+//! on Embree's frustum node test.
 
 use super::Bvh;
 use super::node::{EMPTY, Node, WIDTH, is_leaf};
