@@ -354,6 +354,13 @@ impl Frustum {
     /// Children that some ray of the packet may enter before `tfar_max`, and the lowest entry of each.
     #[inline(always)]
     pub(super) fn test<const CONS: bool>(&self, b: &[[f32; WIDTH]; 6], tfar_max: f32) -> (u32, [f32; WIDTH]) {
+        let (mask, tn) = self.test_vec::<CONS>(b, tfar_max);
+        (mask.to_bitmask(), tn.to_array())
+    }
+
+    /// [`test`](Self::test) with the mask as a select mask and the distances as a vector.
+    #[inline(always)]
+    pub(super) fn test_vec<const CONS: bool>(&self, b: &[[f32; WIDTH]; 6], tfar_max: f32) -> (f32x8, f32x8) {
         let pn = |a: usize| f32x8::new(b[self.near[a]]) - self.o[a];
         let pf = |a: usize| f32x8::new(b[self.far[a]]) - self.o[a];
         let (pn, pf) = ([pn(0), pn(1), pn(2)], [pf(0), pf(1), pf(2)]);
@@ -373,28 +380,6 @@ impl Frustum {
             n(0).fast_max(n(1)).fast_max(n(2).fast_max(self.tnear))
         };
         // Widen by the rounding of the subtraction and product (relative), as in the per-ray test.
-        let tf = if CONS { tf + (tn.abs() + tf.abs()) * f32x8::splat(WIDEN) } else { tf };
-        let mask = if self.int_ok { tn.le_bits(tf) } else { tn.simd_le(tf).to_bitmask() };
-        (mask, tn.to_array())
-    }
-
-    /// [`test`](Self::test) with the mask as a select mask and the distances as a vector.
-    #[inline(always)]
-    pub(super) fn test_vec<const CONS: bool>(&self, b: &[[f32; WIDTH]; 6], tfar_max: f32) -> (f32x8, f32x8) {
-        let pn = |a: usize| f32x8::new(b[self.near[a]]) - self.o[a];
-        let pf = |a: usize| f32x8::new(b[self.far[a]]) - self.o[a];
-        let (pn, pf) = ([pn(0), pn(1), pn(2)], [pf(0), pf(1), pf(2)]);
-        let tfar = f32x8::splat(tfar_max);
-        // Exit distances float, entry distances as bits where allowed (see `test`).
-        let f = |a: usize| (pf[a] * self.rmin[a]).fast_max(pf[a] * self.rmax[a]);
-        let tf = f(0).fast_min(f(1)).fast_min(f(2).fast_min(tfar));
-        let tn = if self.int_ok {
-            let n = |a: usize| (pn[a] * self.rmin[a]).min_bits(pn[a] * self.rmax[a]);
-            n(0).max_bits(n(1)).max_bits(n(2).max_bits(self.tnear))
-        } else {
-            let n = |a: usize| (pn[a] * self.rmin[a]).fast_min(pn[a] * self.rmax[a]);
-            n(0).fast_max(n(1)).fast_max(n(2).fast_max(self.tnear))
-        };
         let tf = if CONS { tf + (tn.abs() + tf.abs()) * f32x8::splat(WIDEN) } else { tf };
         let mask = if self.int_ok { tn.le_mask(tf) } else { tn.simd_le(tf) };
         (mask, tn)
