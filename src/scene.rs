@@ -20,7 +20,9 @@ use crate::ray::{Hit, HitPacket, HitStream, INVALID_ID, PACKET_WIDTH, Ray, RayPa
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Coherence {
     /// Neighbouring rays take similar paths (camera rays in 4×4 tiles, shadow rays from them
-    /// towards one light): the stream is traced as packets of [`PACKET_WIDTH`] consecutive rays.
+    /// towards one light): closest-hit queries trace each [`GROUP`] of consecutive packets of
+    /// [`PACKET_WIDTH`] rays together (one 8×8 pixel block of camera rays; see
+    /// [`Query::intersect_group_each`]), any-hit queries trace packet by packet.
     Coherent,
     /// Rays are unrelated (diffuse bounces): each ray is traced on its own, SIMD over a node's
     /// children and a leaf's triangles, in groups of 4096 sorted by direction octant.
