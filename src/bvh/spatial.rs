@@ -391,10 +391,14 @@ fn apply(set: Set, cut: Cut, ctx: &Ctx<'_>) -> (Set, Set) {
     match cut {
         Cut::Object(s) => {
             let mut prims = set.prims;
-            let (mid, _) = partition(&mut prims, &s);
+            // The partition bounds both sides (and their centroids) as it goes.
+            let (mid, [(lb, lc), (rb, rc)]) = partition(&mut prims, &s);
             if mid > 0 && mid < prims.len() {
                 let right = prims.split_off(mid);
-                return (Set::of(prims), Set::of(right));
+                return (
+                    Set { prims, bounds: lb, centroids: lc },
+                    Set { prims: right, bounds: rb, centroids: rc },
+                );
             }
             halve(prims)
         }
