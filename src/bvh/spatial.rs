@@ -395,10 +395,7 @@ fn apply(set: Set, cut: Cut, ctx: &Ctx<'_>) -> (Set, Set) {
             let (mid, [(lb, lc), (rb, rc)]) = partition(&mut prims, &s);
             if mid > 0 && mid < prims.len() {
                 let right = prims.split_off(mid);
-                return (
-                    Set { prims, bounds: lb, centroids: lc },
-                    Set { prims: right, bounds: rb, centroids: rc },
-                );
+                return (Set { prims, bounds: lb, centroids: lc }, Set { prims: right, bounds: rb, centroids: rc });
             }
             halve(prims)
         }
