@@ -458,7 +458,7 @@ fn world_box(m: &Affine3A, lo: Vec3, hi: Vec3) -> Aabb {
 fn layout(node: &BuildNode, nodes: &mut Vec<Node>) -> u32 {
     match node {
         BuildNode::Leaf { start, count } => leaf_ref(*start, *count),
-        BuildNode::Inner { children } => {
+        BuildNode::Inner { children, .. } => {
             let index = nodes.len();
             nodes.push(Node::default());
             for (i, (b, child)) in children.iter().enumerate() {

@@ -164,13 +164,41 @@ impl PrimRef {
 /// The builder's output before flattening.
 pub(crate) enum BuildNode {
     /// Primitives `start..start + count` of the reordered reference array.
-    Leaf {
-        start: usize,
-        count: usize,
-    },
+    Leaf { start: usize, count: usize },
     Inner {
         children: Vec<(Aabb, BuildNode)>,
+        /// The subtree's sizes, so that it can be flattened in parallel into disjoint slices.
+        size: Size,
     },
+}
+
+/// Sizes of a subtree: inner nodes (itself included), leaves, and triangle blocks of its leaves.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) struct Size {
+    pub nodes: usize,
+    pub leaves: usize,
+    pub blocks: usize,
+}
+
+impl BuildNode {
+    /// An inner node over `children`, its size summed from theirs.
+    pub fn inner(children: Vec<(Aabb, BuildNode)>) -> Self {
+        let mut size = Size { nodes: 1, leaves: 0, blocks: 0 };
+        for (_, c) in &children {
+            let s = c.size();
+            size.nodes += s.nodes;
+            size.leaves += s.leaves;
+            size.blocks += s.blocks;
+        }
+        BuildNode::Inner { children, size }
+    }
+
+    pub fn size(&self) -> Size {
+        match self {
+            BuildNode::Leaf { count, .. } => Size { nodes: 0, leaves: 1, blocks: count.div_ceil(BLOCK) },
+            BuildNode::Inner { size, .. } => *size,
+        }
+    }
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -466,7 +494,7 @@ fn recurse_at(set: Set, prims: &mut [PrimRef], base: usize, cfg: &BuildConfig, d
     } else {
         pieces.into_iter().map(build_child).collect()
     };
-    BuildNode::Inner { children: built }
+    BuildNode::inner(built)
 }
 
 #[cfg(test)]
@@ -492,7 +520,7 @@ mod tests {
                     seen.push(p.id());
                 }
             }
-            BuildNode::Inner { children } => {
+            BuildNode::Inner { children, .. } => {
                 assert!(children.len() >= 2 && children.len() <= WIDTH);
                 for (b, c) in children {
                     check(c, prims, seen, b);

@@ -128,9 +128,7 @@ fn flatten(tree: Tree, out: &mut Vec<PrimRef>) -> BuildNode {
             out.extend_from_slice(&p);
             BuildNode::Leaf { start, count: p.len() }
         }
-        Tree::Inner(children) => {
-            BuildNode::Inner { children: children.into_iter().map(|(b, c)| (b, flatten(c, out))).collect() }
-        }
+        Tree::Inner(children) => BuildNode::inner(children.into_iter().map(|(b, c)| (b, flatten(c, out))).collect()),
     }
 }
 
