@@ -229,6 +229,10 @@ impl Bvh {
     }
 }
 
+/// One child's share of a parallel layout: bounds, subtree, first node index, node and leaf
+/// slices, first block.
+type LayoutJob<'a> = (&'a Aabb, &'a BuildNode, usize, &'a mut [Node], &'a mut [(usize, usize)], usize);
+
 /// Lays `node` out depth-first: itself in `nodes[0]` (index `base` of the whole node array), its
 /// subtree in the rest of `nodes`, its leaves' primitive ranges in order in `leaves`, their blocks
 /// numbered from `block`. Returns the child reference naming it. The slices have exactly the
@@ -260,10 +264,7 @@ fn layout(
                 index += s.nodes;
                 block += s.blocks;
             }
-            let lay =
-                |(b, c, index, n, l, block): (&Aabb, &BuildNode, usize, &mut [Node], &mut [(usize, usize)], usize)| {
-                    (layout(c, index, n, l, block, parallel), *b)
-                };
+            let lay = |(b, c, index, n, l, block): LayoutJob<'_>| (layout(c, index, n, l, block, parallel), *b);
             // Subtrees of a few hundred nodes are not worth a task.
             let refs: Vec<(u32, Aabb)> = if parallel && size.nodes >= 256 {
                 jobs.into_par_iter().map(lay).collect()
