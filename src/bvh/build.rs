@@ -374,20 +374,31 @@ pub(super) fn goes_left(c: Vec3A, split: &Split) -> bool {
 pub(super) fn partition(prims: &mut [PrimRef], split: &Split) -> (usize, [(Aabb, Aabb); 2]) {
     let goes_left = |c: Vec3A| goes_left(c, split);
     let mut sides = [(Aabb::EMPTY, Aabb::EMPTY); 2];
+    let grow = |side: &mut (Aabb, Aabb), p: &PrimRef| {
+        side.0.grow(&p.bounds());
+        side.1.grow_point(p.center2());
+    };
+    // Hoare's scheme (Embree's `serial_partitioning`): both ends scan past the references already
+    // on their side, and only misplaced pairs are swapped.
     let (mut i, mut j) = (0usize, prims.len());
-    while i < j {
-        let p = prims[i];
-        let c = p.center2();
-        if goes_left(c) {
-            sides[0].0.grow(&p.bounds());
-            sides[0].1.grow_point(c);
+    loop {
+        while i < j && goes_left(prims[i].center2()) {
+            grow(&mut sides[0], &prims[i]);
             i += 1;
-        } else {
-            sides[1].0.grow(&p.bounds());
-            sides[1].1.grow_point(c);
-            j -= 1;
-            prims.swap(i, j);
         }
+        while i < j && !goes_left(prims[j - 1].center2()) {
+            grow(&mut sides[1], &prims[j - 1]);
+            j -= 1;
+        }
+        if i >= j {
+            break;
+        }
+        // prims[i] goes right and prims[j - 1] goes left.
+        grow(&mut sides[1], &prims[i]);
+        grow(&mut sides[0], &prims[j - 1]);
+        prims.swap(i, j - 1);
+        i += 1;
+        j -= 1;
     }
     (i, sides)
 }
