@@ -467,32 +467,43 @@ fn recurse_at(set: Set, prims: &mut [PrimRef], base: usize, cfg: &BuildConfig, d
     }
 
     // Fill a wide node: split the child of largest area until there are WIDTH children.
-    let mut children: Vec<(Set, Option<Option<Split>>)> = vec![(local, Some(own_split))];
-    while children.len() < WIDTH {
-        let pick = children
+    // Fixed arrays: vectors here cost three allocations per node.
+    let mut children = [(local, None::<Option<Split>>); WIDTH];
+    children[0].1 = Some(own_split);
+    let mut n = 1;
+    while n < WIDTH {
+        let pick = children[..n]
             .iter()
             .enumerate()
             .filter(|(_, (s, _))| s.count > cfg.min_leaf)
             .max_by(|a, b| a.1.0.bounds.half_area().total_cmp(&b.1.0.bounds.half_area()))
             .map(|(i, _)| i);
         let Some(i) = pick else { break };
-        let (s, known) = children.swap_remove(i);
+        let (s, known) = children[i];
         let split = match known {
             Some(k) => k,
             None if median => None,
             None => find_split(&prims[s.start..s.start + s.count], &s.centroids, cfg),
         };
         let (l, r) = split_set(&s, prims, split);
-        children.push((l, None));
-        children.push((r, None));
+        // The last child takes the split one's slot and the two parts go last (`swap_remove`
+        // and two pushes: the same trees as with a vector).
+        children[i] = children[n - 1];
+        children[n - 1] = (l, None);
+        children[n] = (r, None);
+        n += 1;
     }
     // Children in reference order, so that the slice can be cut into disjoint pieces.
-    let mut sets: Vec<Set> = children.into_iter().map(|(s, _)| s).collect();
-    sets.sort_by_key(|s| s.start);
-    let mut pieces = Vec::with_capacity(sets.len());
+    let mut sets = [local; WIDTH];
+    for (d, (s, _)) in sets.iter_mut().zip(&children[..n]) {
+        *d = *s;
+    }
+    let sets = &mut sets[..n];
+    sets.sort_unstable_by_key(|s| s.start);
+    let mut pieces = Vec::with_capacity(n);
     let mut rest = prims;
     let mut offset = 0usize;
-    for s in &sets {
+    for s in sets.iter() {
         let (_, tail) = rest.split_at_mut(s.start - offset);
         let (piece, tail) = tail.split_at_mut(s.count);
         pieces.push((Set { start: s.start + base, ..*s }, piece));
