@@ -18,6 +18,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if let Some(v) = std::env::var("TRAV_COST").ok().and_then(|v| v.parse().ok()) {
         cfg.traversal_cost = v;
     }
+    if let Some(v) = std::env::var("PAR").ok().and_then(|v| v.parse().ok()) {
+        cfg.parallel_threshold = v;
+    }
     if let Some(v) = std::env::var("SPLIT").ok().and_then(|v| v.parse().ok()) {
         cfg.split_factor = v;
     }

@@ -49,7 +49,7 @@ impl Default for BuildConfig {
             max_leaf: 8 * BLOCK,
             traversal_cost: 1.0,
             intersection_cost: 1.0,
-            parallel_threshold: 4096,
+            parallel_threshold: 1024,
             triangle_test: TriangleTest::MollerTrumbore,
             box_test: BoxTest::Conservative,
             split_factor: 1.0,
@@ -283,6 +283,10 @@ fn bin_into(bins: &mut Bins, prims: &[PrimRef], offset: Vec3A, scale: Vec3A) {
     }
 }
 
+/// Sets of at least four times this many primitives are binned in parallel, in chunks of this
+/// size (each chunk fills its own bins, which are then merged).
+pub(super) const BIN_CHUNK: usize = 4096;
+
 /// The best binned SAH split of `prims` (whose doubled centroids lie in `cb`), if any axis has
 /// extent.
 pub(super) fn find_split(prims: &[PrimRef], cb: &Aabb, cfg: &BuildConfig) -> Option<Split> {
@@ -293,9 +297,9 @@ pub(super) fn find_split(prims: &[PrimRef], cb: &Aabb, cfg: &BuildConfig) -> Opt
     // Slightly less than nb / extent so that the largest centroid lands in the last bin.
     let scale = Vec3A::select(ext.cmpgt(Vec3A::ZERO), Vec3A::splat(nb as f32 * 0.99999) / ext, Vec3A::ZERO);
     // Bins live on this frame and are filled in place (a 3 KB value is not worth moving).
-    if prims.len() >= cfg.parallel_threshold * 4 {
+    if prims.len() >= 4 * BIN_CHUNK {
         let bins = prims
-            .par_chunks(cfg.parallel_threshold)
+            .par_chunks(BIN_CHUNK)
             .fold(
                 || Bins::new(nb),
                 |mut b, c| {

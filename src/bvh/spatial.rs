@@ -338,7 +338,7 @@ fn find_spatial(set: &Set, ctx: &Ctx<'_>) -> Option<Cut> {
     let lo = set.bounds.lo;
     let ext = set.bounds.hi - lo;
     let w = Vec3A::select(ext.cmpgt(Vec3A::ZERO), ext / nb as f32, Vec3A::ZERO);
-    let chunk = ctx.cfg.parallel_threshold;
+    let chunk = super::build::BIN_CHUNK;
     let bins = if set.prims.len() >= 4 * chunk {
         set.prims
             .par_chunks(chunk)
