@@ -334,34 +334,36 @@ thread_local! {
 fn sweep(bins: &Bins, cb: &Aabb, scale: Vec3A) -> Option<Split> {
     let nb = bins.n;
     let mut best: Option<Split> = None;
-    let mut right_area = [0.0f32; MAX_BINS];
-    let mut right_count = [0usize; MAX_BINS];
+    // Per bin i: the cost of the right side `A · blocks` of bins >= i (infinite if empty).
+    let mut right_cost = [0.0f32; MAX_BINS];
     for axis in 0..3 {
         if scale[axis] == 0.0 {
             continue;
         }
-        // Sweep from the right: area and count of bins >= i.
         let mut acc = Aabb::EMPTY;
         let mut cnt = 0usize;
         for i in (1..nb).rev() {
             acc.grow(&bins.boxes[i][axis]);
             cnt += bins.counts[i][axis] as usize;
-            right_area[i] = acc.half_area();
-            right_count[i] = cnt;
+            right_cost[i] = if cnt == 0 { f32::INFINITY } else { acc.half_area() * blocks(cnt) };
         }
-        // Sweep from the left, evaluating the split before bin i.
+        // Sweep from the left, evaluating the split before bin i; no branch on the data (the
+        // comparisons become selects), the first of equal costs wins.
         let mut acc = Aabb::EMPTY;
         let mut cnt = 0usize;
+        let (mut best_cost, mut best_pos) = (best.map_or(f32::INFINITY, |b| b.cost), 0usize);
         for i in 1..nb {
             acc.grow(&bins.boxes[i - 1][axis]);
             cnt += bins.counts[i - 1][axis] as usize;
-            if cnt == 0 || right_count[i] == 0 {
-                continue;
-            }
-            let cost = acc.half_area() * blocks(cnt) + right_area[i] * blocks(right_count[i]);
-            if best.is_none_or(|b| cost < b.cost) {
-                best = Some(Split { axis, pos: i, cost, scale: scale[axis], offset: cb.lo[axis], bins: nb });
-            }
+            let left = if cnt == 0 { f32::INFINITY } else { acc.half_area() * blocks(cnt) };
+            let cost = left + right_cost[i];
+            let better = cost < best_cost;
+            best_cost = if better { cost } else { best_cost };
+            best_pos = if better { i } else { best_pos };
+        }
+        if best_pos != 0 {
+            best =
+                Some(Split { axis, pos: best_pos, cost: best_cost, scale: scale[axis], offset: cb.lo[axis], bins: nb });
         }
     }
     best
