@@ -29,14 +29,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let meshes: Vec<_> = file.build(&BuildConfig::default())?.flatten(&BuildConfig::default())?.meshes().to_vec();
         let mut best = f64::INFINITY;
         let mut inner = f64::INFINITY;
+        // As the harness does: each build runs while the previous scene is still alive.
+        let mut last = None;
         for _ in 0..repeats {
             let m = meshes.clone();
             let t = Instant::now();
             let s = strahl::Scene::build(m, &cfg)?;
             best = best.min(t.elapsed().as_secs_f64());
             inner = inner.min(s.stats().build_ms);
-            std::hint::black_box(s);
+            last = Some(s);
         }
+        std::hint::black_box(last);
         println!("build_ms (as the harness reports it): {inner:.1}");
         let m = meshes.clone();
         let st = strahl::Scene::build(m, &cfg)?.stats().clone();

@@ -317,7 +317,7 @@ pub struct Settings {
 
 impl Default for Settings {
     fn default() -> Self {
-        Self { width: 1024, passes: 5, seed: 1, build_repeats: 3, keep_rays: false }
+        Self { width: 1024, passes: 5, seed: 1, build_repeats: 5, keep_rays: false }
     }
 }
 
