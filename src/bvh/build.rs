@@ -210,8 +210,6 @@ pub(super) struct Split {
     pub(super) cost: f32,
     scale: f32,
     offset: f32,
-    /// Bins used for this split.
-    bins: usize,
 }
 
 /// A set of primitives under construction: a range of the reference array with its bounds.
@@ -261,12 +259,6 @@ impl Bins {
         }
         self
     }
-}
-
-#[inline]
-fn bin_of(c: f32, offset: f32, scale: f32, nbins: usize) -> usize {
-    // Truncation of a finite non-negative value; NaN and negatives become 0.
-    (((c - offset) * scale) as usize).min(nbins - 1)
 }
 
 fn bin_into(bins: &mut Bins, prims: &[PrimRef], offset: Vec3A, scale: Vec3A) {
@@ -363,8 +355,7 @@ fn sweep(bins: &Bins, cb: &Aabb, scale: Vec3A) -> Option<Split> {
             best_pos = if better { i } else { best_pos };
         }
         if best_pos != 0 {
-            best =
-                Some(Split { axis, pos: best_pos, cost: best_cost, scale: scale[axis], offset: cb.lo[axis], bins: nb });
+            best = Some(Split { axis, pos: best_pos, cost: best_cost, scale: scale[axis], offset: cb.lo[axis] });
         }
     }
     best
@@ -373,7 +364,10 @@ fn sweep(bins: &Bins, cb: &Aabb, scale: Vec3A) -> Option<Split> {
 /// Whether a doubled centroid `c` falls on the left of `split`.
 #[inline]
 pub(super) fn goes_left(c: Vec3A, split: &Split) -> bool {
-    bin_of(c[split.axis], split.offset, split.scale, split.bins) < split.pos
+    // The bin is `trunc(x)` (clamped to the last) of `x = (c − offset) · scale ≥ 0`, and
+    // `trunc(x) < pos` exactly when `x < pos` for a whole `pos` below the bin count: one float
+    // comparison of the same rounded `x` the binning computed.
+    (c[split.axis] - split.offset) * split.scale < split.pos as f32
 }
 
 /// Reorders `prims` so that the left side of `split` comes first, computing the bounds of both
