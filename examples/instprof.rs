@@ -40,7 +40,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             last = Some(s);
         }
         std::hint::black_box(last);
-        println!("build_ms (as the harness reports it): {inner:.1}");
+        println!("build_ms (as the harness reports it): {inner:.3}");
         let m = meshes.clone();
         let st = strahl::Scene::build(m, &cfg)?.stats().clone();
         println!(
