@@ -283,9 +283,11 @@ pub(super) const BIN_CHUNK: usize = 4096;
 /// extent.
 pub(super) fn find_split(prims: &[PrimRef], cb: &Aabb, cfg: &BuildConfig) -> Option<Split> {
     // Small sets get fewer bins: the bins are cleared and swept on every call, and a set of 10
-    // primitives gains nothing from 32 of them. `4 + n/8` (all 32 from 224 primitives) sits
-    // between `n/2` and Embree's `4 + n/20` (PERFORMANCE.md has the SAH and times of all three).
-    let nb = (4 + prims.len() / 8).min(cfg.bins.max(4));
+    // primitives gains nothing from 32 of them. `n/2` up to 16 bins, then `4 + n/8` (all 32 from
+    // 224 primitives): between `n/2` and Embree's `4 + n/20` (PERFORMANCE.md has the SAH and
+    // times of each).
+    let n = prims.len();
+    let nb = (4 + n / 8).max((n / 2).min(16)).min(cfg.bins.max(4));
     let ext = cb.hi - cb.lo;
     // Slightly less than nb / extent so that the largest centroid lands in the last bin.
     let scale = Vec3A::select(ext.cmpgt(Vec3A::ZERO), Vec3A::splat(nb as f32 * 0.99999) / ext, Vec3A::ZERO);
