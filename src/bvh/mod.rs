@@ -279,3 +279,51 @@ fn layout(
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::node::{is_leaf, leaf_blocks};
+    use super::*;
+    use crate::procedural;
+
+    /// Walks the flat tree from the root: returns, in depth-first order, the inner nodes reached
+    /// and the block ranges of the leaves.
+    fn walk(bvh: &Bvh) -> (Vec<u32>, Vec<(usize, usize)>) {
+        let (mut inner, mut blocks) = (Vec::new(), Vec::new());
+        let mut stack = vec![bvh.root];
+        while let Some(r) = stack.pop() {
+            if is_leaf(r) {
+                blocks.push(leaf_blocks(r));
+                continue;
+            }
+            inner.push(r);
+            let n = &bvh.nodes[r as usize];
+            stack.extend(n.child.iter().rev().copied().filter(|&c| c != EMPTY));
+        }
+        (inner, blocks)
+    }
+
+    #[test]
+    fn flat_layout_is_depth_first_and_complete_in_parallel_and_serially() {
+        // 10,920 triangles: above the parallel threshold, with subtrees of more than 256 nodes.
+        let mesh = procedural::sphereflake(2, 6, 12);
+        for parallel_threshold in [1024, usize::MAX / 2] {
+            let cfg = BuildConfig { parallel_threshold, ..BuildConfig::default() };
+            let bvh = Bvh::build(std::slice::from_ref(&mesh), &cfg).unwrap();
+            let (inner, blocks) = walk(&bvh);
+            // Depth-first preorder: the walk meets node i as the i-th inner node.
+            assert_eq!(inner, (0..bvh.nodes.len() as u32).collect::<Vec<_>>(), "threshold {parallel_threshold}");
+            // Leaves take consecutive block ranges in the same order, covering every block once.
+            let mut next = 0;
+            for (start, count) in blocks {
+                assert_eq!(start, next);
+                next += count;
+            }
+            assert_eq!(next, bvh.blocks.len());
+            let mut prims: Vec<u32> =
+                bvh.blocks.iter().flat_map(|b| b.prim.iter().copied().filter(|&p| p != u32::MAX)).collect();
+            prims.sort_unstable();
+            assert_eq!(prims, (0..mesh.triangle_count() as u32).collect::<Vec<_>>());
+        }
+    }
+}
