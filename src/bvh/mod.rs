@@ -254,26 +254,31 @@ fn layout(
             let (me, mut rest) = nodes.split_first_mut().expect("an inner node's slice holds it");
             let mut rest_leaves = leaves;
             let (mut index, mut block) = (base + 1, block);
-            let mut jobs = Vec::with_capacity(children.len());
-            for (b, c) in children {
+            // Each child's share of the arrays, in order.
+            let jobs = children.iter().map(|(b, c)| {
                 let s = c.size();
                 let (n, tail) = std::mem::take(&mut rest).split_at_mut(s.nodes);
                 let (l, ltail) = std::mem::take(&mut rest_leaves).split_at_mut(s.leaves);
-                jobs.push((b, c, index, n, l, block));
+                let job = (b, c, index, n, l, block);
                 (rest, rest_leaves) = (tail, ltail);
                 index += s.nodes;
                 block += s.blocks;
-            }
+                job
+            });
             let lay = |(b, c, index, n, l, block): LayoutJob<'_>| (layout(c, index, n, l, block, parallel), *b);
-            // Subtrees of a few hundred nodes are not worth a task.
-            let refs: Vec<(u32, Aabb)> = if parallel && size.nodes >= 256 {
-                jobs.into_par_iter().map(lay).collect()
+            // Subtrees of a few hundred nodes are not worth a task. (`nodes` holds defaults: only
+            // the used slots are set.)
+            if parallel && size.nodes >= 256 {
+                let jobs: Vec<LayoutJob<'_>> = jobs.collect();
+                let refs: Vec<(u32, Aabb)> = jobs.into_par_iter().map(lay).collect();
+                for (i, (r, b)) in refs.into_iter().enumerate() {
+                    me.set(i, r, b.lo.into(), b.hi.into());
+                }
             } else {
-                jobs.into_iter().map(lay).collect()
-            };
-            *me = Node::default();
-            for (i, (r, b)) in refs.into_iter().enumerate() {
-                me.set(i, r, b.lo.into(), b.hi.into());
+                for (i, job) in jobs.enumerate() {
+                    let (r, b) = lay(job);
+                    me.set(i, r, b.lo.into(), b.hi.into());
+                }
             }
             base as u32
         }
