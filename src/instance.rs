@@ -344,7 +344,7 @@ impl InstancedScene {
                     },
                     |l, (k, h)| {
                         out.placed[l] = k;
-                        out.hit[l] = Some(h);
+                        out.hit[l] = Some(self.object_hit(k, &h));
                     },
                 );
                 return ANY && out.mask == pb.live;
@@ -372,8 +372,7 @@ impl InstancedScene {
                     } else {
                         t[l] = r.t[l];
                         out.placed[l] = k as u32;
-                        out.hit[l] =
-                            Some(LeafHit { block: r.block[l], lane: r.lane[l], t: r.t[l], u: r.u[l], v: r.v[l] });
+                        out.hit[l] = r.get(l);
                     }
                 }
                 out.mask |= r.mask;
@@ -387,19 +386,25 @@ impl InstancedScene {
         out
     }
 
-    /// The public hit record of a leaf hit in placed instance `k`.
+    /// The hit record, in object space, of a leaf hit in placed instance `k`.
     #[inline]
-    fn hit_record(&self, k: u32, h: &LeafHit) -> Hit {
+    fn object_hit(&self, k: u32, h: &LeafHit) -> Hit {
+        self.objects[self.placed[k as usize].object as usize].bvh().hit_record(h)
+    }
+
+    /// The public hit record of an object-space hit in placed instance `k`.
+    #[inline]
+    fn world_hit(&self, k: u32, hit: &Hit) -> Hit {
         let p = &self.placed[k as usize];
-        let hit = self.objects[p.object as usize].bvh().hit_record(h);
-        Hit { ng: Vec3::from(p.normal_to_world * Vec3A::from(hit.ng)), inst_id: p.id, ..hit }
+        Hit { ng: Vec3::from(p.normal_to_world * Vec3A::from(hit.ng)), inst_id: p.id, ..*hit }
     }
 }
 
 struct PacketHits {
     mask: u32,
     placed: [u32; PACKET_WIDTH],
-    hit: [Option<LeafHit>; PACKET_WIDTH],
+    /// In object space.
+    hit: [Option<Hit>; PACKET_WIDTH],
 }
 
 /// Whether `m` is finite with a finite inverse: what an instance's transform must be.
@@ -475,7 +480,7 @@ fn layout(node: &BuildNode, nodes: &mut Vec<Node>) -> u32 {
 
 impl Query for InstancedScene {
     fn intersect(&self, ray: &Ray) -> Option<Hit> {
-        self.trace1::<false>(ray).map(|(k, h)| self.hit_record(k, &h))
+        self.trace1::<false>(ray).map(|(k, h)| self.world_hit(k, &self.object_hit(k, &h)))
     }
 
     fn occluded(&self, ray: &Ray) -> bool {
@@ -489,7 +494,7 @@ impl Query for InstancedScene {
             let l = bits.trailing_zeros() as usize;
             bits &= bits - 1;
             if let Some(h) = &r.hit[l] {
-                f(l, &self.hit_record(r.placed[l], h));
+                f(l, &self.world_hit(r.placed[l], h));
             }
         }
     }

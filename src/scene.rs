@@ -9,7 +9,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use crate::bvh::group::GROUP;
-use crate::bvh::traverse::{LeafHit, PacketHits};
+use crate::bvh::traverse::PacketHits;
 use crate::bvh::{BoxTest, BuildConfig, BuildStats, Bvh};
 use crate::error::Result;
 use crate::geometry::TriangleTest;
@@ -101,13 +101,26 @@ impl Query for Scene {
         while bits != 0 {
             let lane = bits.trailing_zeros() as usize;
             bits &= bits - 1;
-            let h = LeafHit { block: r.block[lane], lane: r.lane[lane], t: r.t[lane], u: r.u[lane], v: r.v[lane] };
-            f(lane, &self.bvh.hit_record(&h));
+            if let Some(h) = r.get(lane) {
+                f(lane, &h);
+            }
         }
+    }
+
+    fn intersect_packet(&self, rays: &RayPacket, hits: &mut HitPacket) {
+        *hits = self.bvh.trace_packet::<false>(rays).to_hit_packet();
     }
 
     fn occluded_packet(&self, rays: &RayPacket) -> u32 {
         self.bvh.trace_packet::<true>(rays).mask
+    }
+
+    fn intersect_group(&self, rays: &[RayPacket; GROUP], hits: &mut [HitPacket; GROUP]) {
+        let mut out = [PacketHits::default(); GROUP];
+        self.bvh.trace_group(rays, &mut out);
+        for (h, r) in hits.iter_mut().zip(&out) {
+            *h = r.to_hit_packet();
+        }
     }
 
     fn intersect_group_each(&self, rays: &[RayPacket; GROUP], mut f: impl FnMut(usize, usize, &Hit)) {
@@ -118,8 +131,9 @@ impl Query for Scene {
             while bits != 0 {
                 let lane = bits.trailing_zeros() as usize;
                 bits &= bits - 1;
-                let h = LeafHit { block: r.block[lane], lane: r.lane[lane], t: r.t[lane], u: r.u[lane], v: r.v[lane] };
-                f(i, lane, &self.bvh.hit_record(&h));
+                if let Some(h) = r.get(lane) {
+                    f(i, lane, &h);
+                }
             }
         }
     }
@@ -151,6 +165,14 @@ pub trait Query: Sync {
         for (i, p) in rays.iter().enumerate() {
             self.intersect_packet_each(p, |lane, h| f(i, lane, h));
         }
+    }
+
+    /// Closest hits of [`GROUP`] packets (see
+    /// [`intersect_group_each`](Self::intersect_group_each)); lanes without a hit are written as
+    /// misses.
+    fn intersect_group(&self, rays: &[RayPacket; GROUP], hits: &mut [HitPacket; GROUP]) {
+        *hits = [HitPacket::default(); GROUP];
+        self.intersect_group_each(rays, |i, lane, h| hits[i].set(lane, Some(*h)));
     }
 
     /// Closest hits of the active lanes of `rays`; inactive lanes are written as misses.
@@ -211,17 +233,22 @@ fn intersect_range<Q: Query + ?Sized>(
     coherence: Coherence,
 ) {
     let n = out.len();
-    out.clear();
     match coherence {
         Coherence::Coherent => {
             const G: usize = GROUP * PACKET_WIDTH;
             let whole = n / G * G;
+            // Whole groups write every entry.
+            out.clear(whole);
             let mut ps = [RayPacket::default(); GROUP];
+            let mut hs = [HitPacket::default(); GROUP];
             for k in (0..whole).step_by(G) {
                 for (i, p) in ps.iter_mut().enumerate() {
                     rays.whole_packet_into(start + k + i * PACKET_WIDTH, p);
                 }
-                q.intersect_group_each(&ps, |i, lane, h| out.set(k + i * PACKET_WIDTH + lane, h));
+                q.intersect_group(&ps, &mut hs);
+                for (i, h) in hs.iter().enumerate() {
+                    out.set_packet(k + i * PACKET_WIDTH, h);
+                }
             }
             for k in (whole..n).step_by(PACKET_WIDTH) {
                 let p = rays.packet(start + k, (n - k).min(PACKET_WIDTH));
@@ -229,6 +256,7 @@ fn intersect_range<Q: Query + ?Sized>(
             }
         }
         Coherence::Incoherent => {
+            out.clear(0);
             for_each_by_octant(rays, start, n, |k, r| {
                 if let Some(h) = q.intersect(r) {
                     out.set(k, &h);
@@ -320,14 +348,29 @@ impl<'a> HitSlice<'a> {
         self.t.len()
     }
 
-    /// Marks every entry a miss: `t = +inf` and invalid ids, as [`HitPacket`] defines a miss
+    /// Marks every entry from `from` on a miss: `t = +inf` and invalid ids, as [`HitPacket`] defines a miss
     /// (the other fields of a miss are unspecified; writing them too cost Cornell's and the
     /// teapot's primary streams a tenth of their time).
-    fn clear(&mut self) {
-        self.t.fill(f32::INFINITY);
+    fn clear(&mut self, from: usize) {
+        self.t[from..].fill(f32::INFINITY);
         for ids in [&mut *self.prim_id, &mut *self.geom_id, &mut *self.inst_id] {
-            ids.fill(INVALID_ID);
+            ids[from..].fill(INVALID_ID);
         }
+    }
+
+    /// Writes the whole packet `h` to entries `i..i + PACKET_WIDTH`.
+    #[inline(always)]
+    fn set_packet(&mut self, i: usize, h: &HitPacket) {
+        let r = i..i + PACKET_WIDTH;
+        self.t[r.clone()].copy_from_slice(&h.t);
+        self.u[r.clone()].copy_from_slice(&h.u);
+        self.v[r.clone()].copy_from_slice(&h.v);
+        self.ng_x[r.clone()].copy_from_slice(&h.ng_x);
+        self.ng_y[r.clone()].copy_from_slice(&h.ng_y);
+        self.ng_z[r.clone()].copy_from_slice(&h.ng_z);
+        self.prim_id[r.clone()].copy_from_slice(&h.prim_id);
+        self.geom_id[r.clone()].copy_from_slice(&h.geom_id);
+        self.inst_id[r].copy_from_slice(&h.inst_id);
     }
 
     #[inline]

@@ -59,6 +59,15 @@ pub fn assert_same_hit(a: Option<Hit>, b: Option<Hit>, rel: f32, what: &str) {
             assert!((a.t - b.t).abs() <= tol, "{what}: t {} vs {}", a.t, b.t);
             if (a.geom_id, a.prim_id) != (b.geom_id, b.prim_id) {
                 assert_eq!(a.t, b.t, "{what}: different primitives at different distances: {a:?} vs {b:?}");
+            } else {
+                // The same triangle: the same record (normal and instance exactly, the
+                // barycentrics within the depth tolerance's share).
+                assert_eq!((a.ng, a.inst_id), (b.ng, b.inst_id), "{what}: normal or instance differ: {a:?} vs {b:?}");
+                let uv_tol = rel.max(f32::EPSILON) * 4.0;
+                assert!(
+                    (a.u - b.u).abs() <= uv_tol && (a.v - b.v).abs() <= uv_tol,
+                    "{what}: barycentrics differ: {a:?} vs {b:?}"
+                );
             }
         }
         _ => panic!("{what}: hit/miss differ: {a:?} vs {b:?}"),
