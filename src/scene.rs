@@ -108,7 +108,7 @@ impl Query for Scene {
     }
 
     fn intersect_packet(&self, rays: &RayPacket, hits: &mut HitPacket) {
-        *hits = self.bvh.trace_packet::<false>(rays).to_hit_packet();
+        *hits = self.bvh.trace_packet::<false>(rays).hit_packet();
     }
 
     fn occluded_packet(&self, rays: &RayPacket) -> u32 {
@@ -119,7 +119,7 @@ impl Query for Scene {
         let mut out = [PacketHits::default(); GROUP];
         self.bvh.trace_group(rays, &mut out);
         for (h, r) in hits.iter_mut().zip(&out) {
-            *h = r.to_hit_packet();
+            *h = r.hit_packet();
         }
     }
 

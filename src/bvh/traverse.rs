@@ -142,7 +142,7 @@ impl PacketHits {
 
     /// The public form: misses keep the defaults (`t = +inf`, invalid ids, zeros).
     #[inline(always)]
-    pub fn to_hit_packet(&self) -> HitPacket {
+    pub fn hit_packet(&self) -> HitPacket {
         HitPacket {
             t: self.t,
             u: self.u,
