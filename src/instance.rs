@@ -31,7 +31,7 @@ use crate::geometry::badouel::Badouel;
 use crate::geometry::moeller::Moller;
 use crate::geometry::triangle::Kernel;
 use crate::geometry::watertight::Watertight;
-use crate::ray::{Hit, PACKET_WIDTH, Ray, RayPacket};
+use crate::ray::{Hit, HitPacket, PACKET_WIDTH, Ray, RayPacket};
 use crate::scene::{Query, Scene};
 use crate::simd::Pf;
 
@@ -331,6 +331,7 @@ impl InstancedScene {
             return out;
         };
         let base = stack.push_root(self.root);
+        let mut r = HitPacket::default();
         walk_packet::<ANY, CONS>(&self.nodes, &pb, stack, base, &mut tfar, |leaf, lanes, tfar, stack| {
             if lanes != 0 {
                 // A few lanes walk this part of the instance tree one at a time.
@@ -358,12 +359,12 @@ impl InstancedScene {
                     continue;
                 }
                 let q = object_packet(&pl.to_object, &pb, *tfar, p, active);
-                let r = self.objects[pl.object as usize].bvh().trace_packet_with::<ANY, K, CONS>(&q, stack);
-                if r.mask == 0 {
+                let mask = self.objects[pl.object as usize].bvh().trace_packet_with::<ANY, K, CONS>(&q, &mut r, stack);
+                if mask == 0 {
                     continue;
                 }
                 let mut t = tfar.to_array();
-                let mut bits = r.mask;
+                let mut bits = mask;
                 while bits != 0 {
                     let l = bits.trailing_zeros() as usize;
                     bits &= bits - 1;
@@ -375,7 +376,7 @@ impl InstancedScene {
                         out.hit[l] = r.get(l);
                     }
                 }
-                out.mask |= r.mask;
+                out.mask |= mask;
                 *tfar = Pf::new(t);
                 if ANY && out.mask == pb.live {
                     return true;

@@ -9,7 +9,6 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use crate::bvh::group::GROUP;
-use crate::bvh::traverse::PacketHits;
 use crate::bvh::{BoxTest, BuildConfig, BuildStats, Bvh};
 use crate::error::Result;
 use crate::geometry::TriangleTest;
@@ -96,45 +95,41 @@ impl Query for Scene {
     }
 
     fn intersect_packet_each(&self, rays: &RayPacket, mut f: impl FnMut(usize, &Hit)) {
-        let r = self.bvh.trace_packet::<false>(rays);
-        let mut bits = r.mask;
-        while bits != 0 {
-            let lane = bits.trailing_zeros() as usize;
-            bits &= bits - 1;
-            if let Some(h) = r.get(lane) {
-                f(lane, &h);
-            }
-        }
+        let mut hits = HitPacket::default();
+        let mask = self.bvh.trace_packet::<false>(rays, &mut hits);
+        each_hit(&hits, mask, |lane, h| f(lane, h));
     }
 
     fn intersect_packet(&self, rays: &RayPacket, hits: &mut HitPacket) {
-        *hits = self.bvh.trace_packet::<false>(rays).hit_packet();
+        self.bvh.trace_packet::<false>(rays, hits);
     }
 
     fn occluded_packet(&self, rays: &RayPacket) -> u32 {
-        self.bvh.trace_packet::<true>(rays).mask
+        self.bvh.trace_packet::<true>(rays, &mut HitPacket::default())
     }
 
     fn intersect_group(&self, rays: &[RayPacket; GROUP], hits: &mut [HitPacket; GROUP]) {
-        let mut out = [PacketHits::default(); GROUP];
-        self.bvh.trace_group(rays, &mut out);
-        for (h, r) in hits.iter_mut().zip(&out) {
-            *h = r.hit_packet();
-        }
+        self.bvh.trace_group(rays, hits);
     }
 
     fn intersect_group_each(&self, rays: &[RayPacket; GROUP], mut f: impl FnMut(usize, usize, &Hit)) {
-        let mut out = [PacketHits::default(); GROUP];
-        self.bvh.trace_group(rays, &mut out);
-        for (i, r) in out.iter().enumerate() {
-            let mut bits = r.mask;
-            while bits != 0 {
-                let lane = bits.trailing_zeros() as usize;
-                bits &= bits - 1;
-                if let Some(h) = r.get(lane) {
-                    f(i, lane, &h);
-                }
-            }
+        let mut hits = [HitPacket::default(); GROUP];
+        self.bvh.trace_group(rays, &mut hits);
+        for (i, h) in hits.iter().enumerate() {
+            each_hit(h, u32::MAX, |lane, h| f(i, lane, h));
+        }
+    }
+}
+
+/// Calls `f(lane, hit)` for the lanes of `mask` that hit in `hits`.
+#[inline(always)]
+fn each_hit(hits: &HitPacket, mask: u32, mut f: impl FnMut(usize, &Hit)) {
+    let mut bits = mask & crate::simd::low_bits(PACKET_WIDTH);
+    while bits != 0 {
+        let lane = bits.trailing_zeros() as usize;
+        bits &= bits - 1;
+        if let Some(h) = hits.get(lane) {
+            f(lane, &h);
         }
     }
 }

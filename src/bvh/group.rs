@@ -20,7 +20,7 @@ use crate::geometry::badouel::Badouel;
 use crate::geometry::moeller::Moller;
 use crate::geometry::triangle::{Kernel, RayK, TriangleTest};
 use crate::geometry::watertight::Watertight;
-use crate::ray::RayPacket;
+use crate::ray::{HitPacket, RayPacket};
 use crate::simd::*;
 
 /// Packets per coherent group: four 4×4 tiles, an 8×8 pixel block.
@@ -52,20 +52,24 @@ fn leaf_children(node: &Node) -> u32 {
 impl Bvh {
     /// Closest hits of [`GROUP`] packets traced together (see the module comment). Packets that
     /// do not share one origin and direction octant are traced one by one.
-    /// The results go to `out` (an out-parameter: returned by value, the 1.3 KB array was
-    /// copied twice per group).
-    pub(crate) fn trace_group(&self, ps: &[RayPacket; GROUP], out: &mut [PacketHits; GROUP]) {
-        with_stack(|stack| dispatch!(self.test, self.box_test, |K, C| self.trace_group_with::<K, C>(ps, out, stack)))
+    /// The hits go to `hits` (without instance ids; an out-parameter: returned by value, the
+    /// results were copied twice per group).
+    pub(crate) fn trace_group(&self, ps: &[RayPacket; GROUP], hits: &mut [HitPacket; GROUP]) {
+        with_stack(|stack| {
+            dispatch!(self.test, self.box_test, |K, C| {
+                let mut out = hits.each_mut().map(PacketHits::new);
+                self.trace_group_with::<K, C>(ps, &mut out, stack)
+            })
+        })
     }
 
     #[inline(never)]
     pub(crate) fn trace_group_with<K: Kernel, const CONS: bool>(
         &self,
         ps: &[RayPacket; GROUP],
-        out: &mut [PacketHits; GROUP],
+        out: &mut [PacketHits<'_>; GROUP],
         stack: &mut Stack,
     ) {
-        *out = [PacketHits::default(); GROUP];
         if self.root == EMPTY {
             return;
         }
@@ -100,8 +104,8 @@ impl Bvh {
             tfar[i] = t;
         }
         let (Some(gf), true) = (group, shared) else {
-            for (i, p) in ps.iter().enumerate() {
-                out[i] = self.trace_packet_with::<false, K, CONS>(p, stack);
+            for (p, o) in ps.iter().zip(out.iter_mut()) {
+                self.trace_packet_from::<false, K, CONS>(p, self.root, o, stack);
             }
             return;
         };
@@ -116,7 +120,7 @@ impl Bvh {
                     self.trace_packet_from::<false, K, CONS>(&p, r, &mut out[s], stack);
                     let hit = out[s].mask;
                     tfar[s] =
-                        Pf::new(std::array::from_fn(|l| if hit & (1 << l) != 0 { out[s].t[l] } else { p.tfar[l] }));
+                        Pf::new(std::array::from_fn(|l| if hit & (1 << l) != 0 { out[s].hit.t[l] } else { p.tfar[l] }));
                 } else {
                     self.leaf_packet::<false, K>(r, &rk[s], rk[s].tnear, live[s], &mut tfar[s], &mut out[s]);
                 }

@@ -24,7 +24,7 @@ use super::build::MEDIAN_DEPTH;
 use super::node::{EMPTY, Node, WIDTH, is_leaf, leaf_blocks};
 use crate::geometry::badouel::Badouel;
 use crate::geometry::moeller::Moller;
-use crate::geometry::triangle::{BLOCK, Kernel, Ray4, RayK, TriangleTest};
+use crate::geometry::triangle::{BLOCK, Kernel, Ray4, RayK, TriBlock, TriangleTest};
 use crate::geometry::watertight::Watertight;
 use crate::ray::{Hit, HitPacket, INVALID_ID, MIN_DIRECTION, PACKET_WIDTH, Ray, RayPacket};
 use crate::simd::*;
@@ -82,91 +82,57 @@ pub(crate) struct LeafHit {
     pub v: f32,
 }
 
-/// Per-lane results of a packet query, in the public [`HitPacket`]'s form: the leaf tests write
-/// each hit triangle's fields into its lanes with vector selects. Building a hit record per lane
-/// after the walk (a gather and a cross product each) took 14–19% of Cornell's camera packets.
-#[derive(Clone, Copy, Debug)]
-#[repr(C, align(64))]
-pub(crate) struct PacketHits {
-    pub t: [f32; PACKET_WIDTH],
-    pub u: [f32; PACKET_WIDTH],
-    pub v: [f32; PACKET_WIDTH],
-    pub ng_x: [f32; PACKET_WIDTH],
-    pub ng_y: [f32; PACKET_WIDTH],
-    pub ng_z: [f32; PACKET_WIDTH],
-    pub prim: [u32; PACKET_WIDTH],
-    pub geom: [u32; PACKET_WIDTH],
+/// Per-lane results of a packet query, written straight into the caller's [`HitPacket`]: the
+/// leaf tests select each hit triangle's fields into its lanes with vector operations. Building a
+/// hit record per lane after the walk (a gather and a cross product each) took 14–19% of
+/// Cornell's camera packets, and copying a returned 576-byte record twice another 10%.
+pub(crate) struct PacketHits<'a> {
+    /// Closest hits; the lanes outside `mask` keep what [`PacketHits::new`] wrote (misses).
+    pub hit: &'a mut HitPacket,
     /// Bit `i`: lane `i` hit something (closest hit) or is occluded (any hit).
     pub mask: u32,
 }
 
-impl Default for PacketHits {
-    fn default() -> Self {
-        Self {
-            t: [f32::INFINITY; PACKET_WIDTH],
-            u: [0.0; PACKET_WIDTH],
-            v: [0.0; PACKET_WIDTH],
-            ng_x: [0.0; PACKET_WIDTH],
-            ng_y: [0.0; PACKET_WIDTH],
-            ng_z: [0.0; PACKET_WIDTH],
-            prim: [INVALID_ID; PACKET_WIDTH],
-            geom: [INVALID_ID; PACKET_WIDTH],
-            mask: 0,
-        }
+impl<'a> PacketHits<'a> {
+    /// Marks every lane of `hit` a miss and views it as an empty result.
+    #[inline(always)]
+    pub fn new(hit: &'a mut HitPacket) -> Self {
+        hit.t = [f32::INFINITY; PACKET_WIDTH];
+        hit.prim_id = [INVALID_ID; PACKET_WIDTH];
+        hit.geom_id = [INVALID_ID; PACKET_WIDTH];
+        hit.inst_id = [INVALID_ID; PACKET_WIDTH];
+        Self { hit, mask: 0 }
     }
-}
 
-impl PacketHits {
     /// Records `h` as lane `l`'s hit.
     #[inline(always)]
     pub fn set(&mut self, l: usize, h: &Hit) {
-        (self.t[l], self.u[l], self.v[l]) = (h.t, h.u, h.v);
-        (self.ng_x[l], self.ng_y[l], self.ng_z[l]) = (h.ng.x, h.ng.y, h.ng.z);
-        (self.prim[l], self.geom[l]) = (h.prim_id, h.geom_id);
+        self.hit.set(l, Some(*h));
         self.mask |= 1 << l;
     }
 
-    /// Lane `l`'s hit (without an instance id), if it hit.
+    /// Writes the hit of triangle `lane` of block `b` into the lanes of `valid`.
     #[inline(always)]
-    pub fn get(&self, l: usize) -> Option<Hit> {
-        (self.mask & (1 << l) != 0).then(|| Hit {
-            t: self.t[l],
-            u: self.u[l],
-            v: self.v[l],
-            ng: Vec3::new(self.ng_x[l], self.ng_y[l], self.ng_z[l]),
-            prim_id: self.prim[l],
-            geom_id: self.geom[l],
-            inst_id: INVALID_ID,
-        })
-    }
-
-    /// The public form: misses keep the defaults (`t = +inf`, invalid ids, zeros).
-    #[inline(always)]
-    pub fn hit_packet(&self) -> HitPacket {
-        HitPacket {
-            t: self.t,
-            u: self.u,
-            v: self.v,
-            ng_x: self.ng_x,
-            ng_y: self.ng_y,
-            ng_z: self.ng_z,
-            prim_id: self.prim,
-            geom_id: self.geom,
-            inst_id: [INVALID_ID; PACKET_WIDTH],
+    fn select(&mut self, valid: Pf, b: &TriBlock, test: TriangleTest, lane: usize, t: Pf, u: Pf, v: Pf) {
+        #[inline(always)]
+        fn sel(dst: &mut [f32; PACKET_WIDTH], valid: Pf, x: Pf) {
+            *dst = valid.select(x, Pf::new(*dst)).to_array();
         }
-    }
-
-    /// Writes `x` into the lanes of `valid`.
-    #[inline(always)]
-    fn select(dst: &mut [f32; PACKET_WIDTH], valid: Pf, x: Pf) {
-        *dst = valid.select(x, Pf::new(*dst)).to_array();
-    }
-
-    /// Writes the id `id` into the lanes of `valid`.
-    #[inline(always)]
-    fn select_id(dst: &mut [u32; PACKET_WIDTH], valid: Pf, id: u32) {
-        let old: Pf = bytemuck::cast(*dst);
-        *dst = bytemuck::cast(valid.select(Pf::splat(f32::from_bits(id)), old));
+        #[inline(always)]
+        fn sel_id(dst: &mut [u32; PACKET_WIDTH], valid: Pf, id: u32) {
+            let old: Pf = bytemuck::cast(*dst);
+            *dst = bytemuck::cast(valid.select(Pf::splat(f32::from_bits(id)), old));
+        }
+        let h = &mut *self.hit;
+        let ng = b.ng(test, lane);
+        sel(&mut h.t, valid, t);
+        sel(&mut h.u, valid, u);
+        sel(&mut h.v, valid, v);
+        sel(&mut h.ng_x, valid, Pf::splat(ng.x));
+        sel(&mut h.ng_y, valid, Pf::splat(ng.y));
+        sel(&mut h.ng_z, valid, Pf::splat(ng.z));
+        sel_id(&mut h.prim_id, valid, b.prim[lane]);
+        sel_id(&mut h.geom_id, valid, b.geom_id(test, lane));
     }
 }
 
@@ -590,8 +556,12 @@ impl Bvh {
 
     /// Closest hits (`ANY = false`) or occlusion (`ANY = true`) of the active lanes of a packet.
     /// Invalid rays in active lanes are answered with a miss.
-    pub fn trace_packet<const ANY: bool>(&self, p: &RayPacket) -> PacketHits {
-        with_stack(|stack| dispatch!(self.test, self.box_test, |K, C| self.trace_packet_with::<ANY, K, C>(p, stack)))
+    /// The closest hits go to `hit` (without instance ids); returns the lanes that hit (are
+    /// occluded).
+    pub fn trace_packet<const ANY: bool>(&self, p: &RayPacket, hit: &mut HitPacket) -> u32 {
+        with_stack(|stack| {
+            dispatch!(self.test, self.box_test, |K, C| self.trace_packet_with::<ANY, K, C>(p, hit, stack))
+        })
     }
 
     /// [`trace_packet`](Self::trace_packet) with a chosen kernel, on `stack` above its current
@@ -600,11 +570,12 @@ impl Bvh {
     pub(crate) fn trace_packet_with<const ANY: bool, K: Kernel, const CONS: bool>(
         &self,
         p: &RayPacket,
+        hit: &mut HitPacket,
         stack: &mut Stack,
-    ) -> PacketHits {
-        let mut out = PacketHits::default();
+    ) -> u32 {
+        let mut out = PacketHits::new(hit);
         self.trace_packet_from::<ANY, K, CONS>(p, self.root, &mut out, stack);
-        out
+        out.mask
     }
 
     /// [`trace_packet_with`](Self::trace_packet_with) over the subtree at `root` (a node or a
@@ -615,7 +586,7 @@ impl Bvh {
         &self,
         p: &RayPacket,
         root: u32,
-        out: &mut PacketHits,
+        out: &mut PacketHits<'_>,
         stack: &mut Stack,
     ) {
         if root == EMPTY {
@@ -656,7 +627,7 @@ impl Bvh {
         tnear: Pf,
         live: u32,
         tfar: &mut Pf,
-        out: &mut PacketHits,
+        out: &mut PacketHits<'_>,
     ) -> bool {
         let (start, count) = leaf_blocks(leaf);
         let active = tnear.simd_le(*tfar);
@@ -682,15 +653,7 @@ impl Bvh {
                 }
                 *tfar = valid.select(t, *tfar);
                 out.mask |= bits;
-                let ng = blk.ng(self.test, lane);
-                PacketHits::select(&mut out.t, valid, t);
-                PacketHits::select(&mut out.u, valid, u);
-                PacketHits::select(&mut out.v, valid, v);
-                PacketHits::select(&mut out.ng_x, valid, Pf::splat(ng.x));
-                PacketHits::select(&mut out.ng_y, valid, Pf::splat(ng.y));
-                PacketHits::select(&mut out.ng_z, valid, Pf::splat(ng.z));
-                PacketHits::select_id(&mut out.prim, valid, blk.prim[lane]);
-                PacketHits::select_id(&mut out.geom, valid, blk.geom_id(self.test, lane));
+                out.select(valid, blk, self.test, lane, t, u, v);
             }
         }
         false
