@@ -113,7 +113,7 @@ impl<'a> PacketHits<'a> {
 
     /// Writes the hit of triangle `lane` of block `b` into the lanes of `valid`.
     #[inline(always)]
-    fn select(&mut self, valid: Pf, b: &TriBlock, test: TriangleTest, lane: usize, t: Pf, u: Pf, v: Pf) {
+    fn select(&mut self, valid: Pf, b: &TriBlock, test: TriangleTest, lane: usize, (t, u, v): (Pf, Pf, Pf)) {
         #[inline(always)]
         fn sel(dst: &mut [f32; PACKET_WIDTH], valid: Pf, x: Pf) {
             *dst = valid.select(x, Pf::new(*dst)).to_array();
@@ -653,7 +653,7 @@ impl Bvh {
                 }
                 *tfar = valid.select(t, *tfar);
                 out.mask |= bits;
-                out.select(valid, blk, self.test, lane, t, u, v);
+                out.select(valid, blk, self.test, lane, (t, u, v));
             }
         }
         false
