@@ -22,7 +22,7 @@ use rayon::prelude::*;
 use crate::bvh::build::{self, Aabb, BuildNode, PrimRef};
 use crate::bvh::node::{EMPTY, MAX_BLOCK_INDEX, Node, leaf_blocks, leaf_ref};
 use crate::bvh::traverse::{
-    BoxRay, LeafHit, PacketBoxes, Stack, dispatch, each_lane_alone, walk_packet, walk1, with_stack,
+    BoxRay, LeafHit, PacketBoxes, PacketHits, Stack, dispatch, each_lane_alone, walk_packet, walk1, with_stack,
 };
 use crate::bvh::{BoxTest, BuildConfig};
 use crate::error::{Error, Result};
@@ -31,9 +31,9 @@ use crate::geometry::badouel::Badouel;
 use crate::geometry::moeller::Moller;
 use crate::geometry::triangle::Kernel;
 use crate::geometry::watertight::Watertight;
-use crate::ray::{Hit, HitPacket, PACKET_WIDTH, Ray, RayPacket};
-use crate::scene::{Query, Scene};
-use crate::simd::Pf;
+use crate::ray::{Hit, HitPacket, Ray, RayPacket};
+use crate::scene::{Query, Scene, each_hit};
+use crate::simd::{Pf, lane_mask};
 
 /// One placement of an object: `object` indexes the objects of the [`InstancedScene`], and
 /// `transform` maps object space to world space.
@@ -314,23 +314,29 @@ impl InstancedScene {
         best
     }
 
-    fn trace_packet<const ANY: bool>(&self, p: &RayPacket) -> PacketHits {
-        with_stack(|stack| dispatch!(self.test, self.box_test, |K, C| self.trace_packet_with::<ANY, K, C>(p, stack)))
+    /// Closest hits (into `hit`, in world space) or occlusion of a packet; returns the lanes
+    /// that hit (are occluded).
+    fn trace_packet<const ANY: bool>(&self, p: &RayPacket, hit: &mut HitPacket) -> u32 {
+        with_stack(|stack| {
+            dispatch!(self.test, self.box_test, |K, C| self.trace_packet_with::<ANY, K, C>(p, hit, stack))
+        })
     }
 
     fn trace_packet_with<const ANY: bool, K: Kernel, const CONS: bool>(
         &self,
         p: &RayPacket,
+        hit: &mut HitPacket,
         stack: &mut Stack,
-    ) -> PacketHits {
-        let mut out = PacketHits { mask: 0, placed: [0; PACKET_WIDTH], hit: [None; PACKET_WIDTH] };
+    ) -> u32 {
+        let mut out = PacketHits::new(hit);
         if self.root == EMPTY {
-            return out;
+            return 0;
         }
         let Some((pb, mut tfar)) = PacketBoxes::new(p) else {
-            return out;
+            return 0;
         };
         let base = stack.push_root(self.root);
+        // One object's hits, before they are turned to world space.
         let mut r = HitPacket::default();
         walk_packet::<ANY, CONS>(&self.nodes, &pb, stack, base, &mut tfar, |leaf, lanes, tfar, stack| {
             if lanes != 0 {
@@ -343,10 +349,7 @@ impl InstancedScene {
                         let (k, h) = self.trace1_from::<ANY, K, CONS>(ray, leaf, stack)?;
                         Some((h.t, (k, h)))
                     },
-                    |l, (k, h)| {
-                        out.placed[l] = k;
-                        out.hit[l] = Some(self.object_hit(k, &h));
-                    },
+                    |l, (k, h)| out.set(l, &self.world_hit(k, &self.object_hit(k, &h))),
                 );
                 return ANY && out.mask == pb.live;
             }
@@ -363,28 +366,21 @@ impl InstancedScene {
                 if mask == 0 {
                     continue;
                 }
-                let mut t = tfar.to_array();
-                let mut bits = mask;
-                while bits != 0 {
-                    let l = bits.trailing_zeros() as usize;
-                    bits &= bits - 1;
-                    if ANY {
-                        t[l] = f32::NEG_INFINITY;
-                    } else {
-                        t[l] = r.t[l];
-                        out.placed[l] = k as u32;
-                        out.hit[l] = r.get(l);
-                    }
-                }
+                let valid = lane_mask(mask);
                 out.mask |= mask;
-                *tfar = Pf::new(t);
-                if ANY && out.mask == pb.live {
-                    return true;
+                if ANY {
+                    *tfar = valid.select(Pf::splat(f32::NEG_INFINITY), *tfar);
+                    if out.mask == pb.live {
+                        return true;
+                    }
+                } else {
+                    *tfar = valid.select(Pf::new(r.t), *tfar);
+                    out.take_instanced(valid, &r, &pl.normal_to_world, pl.id);
                 }
             }
             false
         });
-        out
+        out.mask
     }
 
     /// The hit record, in object space, of a leaf hit in placed instance `k`.
@@ -399,13 +395,6 @@ impl InstancedScene {
         let p = &self.placed[k as usize];
         Hit { ng: Vec3::from(p.normal_to_world * Vec3A::from(hit.ng)), inst_id: p.id, ..*hit }
     }
-}
-
-struct PacketHits {
-    mask: u32,
-    placed: [u32; PACKET_WIDTH],
-    /// In object space.
-    hit: [Option<Hit>; PACKET_WIDTH],
 }
 
 /// Whether `m` is finite with a finite inverse: what an instance's transform must be.
@@ -489,18 +478,16 @@ impl Query for InstancedScene {
     }
 
     fn intersect_packet_each(&self, rays: &RayPacket, mut f: impl FnMut(usize, &Hit)) {
-        let r = self.trace_packet::<false>(rays);
-        let mut bits = r.mask;
-        while bits != 0 {
-            let l = bits.trailing_zeros() as usize;
-            bits &= bits - 1;
-            if let Some(h) = &r.hit[l] {
-                f(l, &self.world_hit(r.placed[l], h));
-            }
-        }
+        let mut hits = HitPacket::default();
+        let mask = self.trace_packet::<false>(rays, &mut hits);
+        each_hit(&hits, mask, |lane, h| f(lane, h));
+    }
+
+    fn intersect_packet(&self, rays: &RayPacket, hits: &mut HitPacket) {
+        self.trace_packet::<false>(rays, hits);
     }
 
     fn occluded_packet(&self, rays: &RayPacket) -> u32 {
-        self.trace_packet::<true>(rays).mask
+        self.trace_packet::<true>(rays, &mut HitPacket::default())
     }
 }

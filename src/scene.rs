@@ -123,7 +123,7 @@ impl Query for Scene {
 
 /// Calls `f(lane, hit)` for the lanes of `mask` that hit in `hits`.
 #[inline(always)]
-fn each_hit(hits: &HitPacket, mask: u32, mut f: impl FnMut(usize, &Hit)) {
+pub(crate) fn each_hit(hits: &HitPacket, mask: u32, mut f: impl FnMut(usize, &Hit)) {
     let mut bits = mask & crate::simd::low_bits(PACKET_WIDTH);
     while bits != 0 {
         let lane = bits.trailing_zeros() as usize;

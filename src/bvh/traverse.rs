@@ -17,7 +17,7 @@
 
 use std::cell::RefCell;
 
-use glam::Vec3;
+use glam::{Mat3A, Vec3};
 
 use super::Bvh;
 use super::build::MEDIAN_DEPTH;
@@ -111,18 +111,33 @@ impl<'a> PacketHits<'a> {
         self.mask |= 1 << l;
     }
 
+    /// Takes the hits of `from` in the lanes of `valid`, found in an instance: normals turned
+    /// to world space by `normal_to_world` (the arithmetic of glam's `Mat3A * Vec3A`, so that
+    /// packets and single rays give the same normals), instance id `inst_id`.
+    #[inline(always)]
+    pub fn take_instanced(&mut self, valid: Pf, from: &HitPacket, normal_to_world: &Mat3A, inst_id: u32) {
+        let h = &mut *self.hit;
+        sel(&mut h.t, valid, Pf::new(from.t));
+        sel(&mut h.u, valid, Pf::new(from.u));
+        sel(&mut h.v, valid, Pf::new(from.v));
+        let n = [Pf::new(from.ng_x), Pf::new(from.ng_y), Pf::new(from.ng_z)];
+        let (x, y, z) = (normal_to_world.x_axis, normal_to_world.y_axis, normal_to_world.z_axis);
+        let row = |a: f32, b: f32, c: f32| Pf::splat(a) * n[0] + Pf::splat(b) * n[1] + Pf::splat(c) * n[2];
+        sel(&mut h.ng_x, valid, row(x.x, y.x, z.x));
+        sel(&mut h.ng_y, valid, row(x.y, y.y, z.y));
+        sel(&mut h.ng_z, valid, row(x.z, y.z, z.z));
+        let ids = |dst: &mut [u32; PACKET_WIDTH], src: &[u32; PACKET_WIDTH]| {
+            let (old, new): (Pf, Pf) = (bytemuck::cast(*dst), bytemuck::cast(*src));
+            *dst = bytemuck::cast(valid.select(new, old));
+        };
+        ids(&mut h.prim_id, &from.prim_id);
+        ids(&mut h.geom_id, &from.geom_id);
+        sel_id(&mut h.inst_id, valid, inst_id);
+    }
+
     /// Writes the hit of triangle `lane` of block `b` into the lanes of `valid`.
     #[inline(always)]
     fn select(&mut self, valid: Pf, b: &TriBlock, test: TriangleTest, lane: usize, (t, u, v): (Pf, Pf, Pf)) {
-        #[inline(always)]
-        fn sel(dst: &mut [f32; PACKET_WIDTH], valid: Pf, x: Pf) {
-            *dst = valid.select(x, Pf::new(*dst)).to_array();
-        }
-        #[inline(always)]
-        fn sel_id(dst: &mut [u32; PACKET_WIDTH], valid: Pf, id: u32) {
-            let old: Pf = bytemuck::cast(*dst);
-            *dst = bytemuck::cast(valid.select(Pf::splat(f32::from_bits(id)), old));
-        }
         let h = &mut *self.hit;
         let ng = b.ng(test, lane);
         sel(&mut h.t, valid, t);
@@ -134,6 +149,19 @@ impl<'a> PacketHits<'a> {
         sel_id(&mut h.prim_id, valid, b.prim[lane]);
         sel_id(&mut h.geom_id, valid, b.geom_id(test, lane));
     }
+}
+
+/// Writes `x` into the lanes of `valid`.
+#[inline(always)]
+fn sel(dst: &mut [f32; PACKET_WIDTH], valid: Pf, x: Pf) {
+    *dst = valid.select(x, Pf::new(*dst)).to_array();
+}
+
+/// Writes the id `id` into the lanes of `valid`.
+#[inline(always)]
+fn sel_id(dst: &mut [u32; PACKET_WIDTH], valid: Pf, id: u32) {
+    let old: Pf = bytemuck::cast(*dst);
+    *dst = bytemuck::cast(valid.select(Pf::splat(f32::from_bits(id)), old));
 }
 
 /// Fixed-size traversal stack; no kernel allocates. Each thread keeps one (see [`with_stack`]):
