@@ -1,7 +1,7 @@
 //! Profiling aid: traces a scene file's primary rays (packets and single rays) on one thread.
 //! `cargo run --release --example instprof -- data/forest.toml [packet|packet16|api1|api1d|single|diffuse|diffusep|shadow|shadow1|build] [repeats] [flat]`
 //! (`shadow` and `diffusep` trace as packets, `shadow1` and `diffuse` one ray at a time.)
-//! `MAX_LEAF`, `TRAV_COST` and `SPLIT` (spatial split factor) override the build settings.
+//! `MAX_LEAF`, `TRAV_COST`, `SPLIT` (spatial split factor) and `BOX=fast` override the build settings.
 use std::time::Instant;
 
 use strahl::{BuildConfig, Coherence, HitStream, Query, SceneFile, raygen};
@@ -23,6 +23,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     if let Some(v) = std::env::var("SPLIT").ok().and_then(|v| v.parse().ok()) {
         cfg.split_factor = v;
+    }
+    if std::env::var("BOX").is_ok_and(|v| v == "fast") {
+        cfg.box_test = strahl::BoxTest::Fast;
     }
     if mode == "build" {
         // Build time of the flat scene (all cores of the rayon pool), best of `repeats`.
@@ -86,9 +89,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         println!("packet16 (flat): {:.2} Mrays/s (1 thread, best of {repeats})", primary.len() as f64 / best / 1e6);
         return Ok(());
     }
-    if mode == "api1" || mode == "api1d" {
-        // The single-ray API, one call per ray (as the harness's `single` column).
+    if mode == "api1" || mode == "api1d" || mode == "api1d2" {
+        // The single-ray API, one call per ray (as the harness's `single` column); `api1d2`
+        // traces each diffuse ray twice in a row, the second time with a warm cache.
         let rays = if mode == "api1" { &primary } else { &diffuse };
+        let twice = mode == "api1d2";
         let flat = scene.flatten(&cfg)?;
         let mut best = f64::INFINITY;
         let mut sum = 0.0f32;
@@ -96,6 +101,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let t = Instant::now();
             for i in 0..rays.len() {
                 if let Some(h) = flat.intersect(&rays.get(i)) {
+                    sum += h.t;
+                }
+                if twice && let Some(h) = flat.intersect(&rays.get(i)) {
                     sum += h.t;
                 }
             }
