@@ -174,7 +174,8 @@ impl RayPacket {
 }
 
 /// Closest hits of a [`RayPacket`] in SoA form; a missed or inactive lane has `t = +inf` and
-/// `prim_id = geom_id = INVALID_ID`.
+/// `prim_id = geom_id = inst_id = INVALID_ID` (its other fields are unspecified: the queries
+/// leave them as they were).
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(64))]
 pub struct HitPacket {
