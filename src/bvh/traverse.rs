@@ -126,12 +126,8 @@ impl<'a> PacketHits<'a> {
         sel(&mut h.ng_x, valid, row(x.x, y.x, z.x));
         sel(&mut h.ng_y, valid, row(x.y, y.y, z.y));
         sel(&mut h.ng_z, valid, row(x.z, y.z, z.z));
-        let ids = |dst: &mut [u32; PACKET_WIDTH], src: &[u32; PACKET_WIDTH]| {
-            let (old, new): (Pf, Pf) = (bytemuck::cast(*dst), bytemuck::cast(*src));
-            *dst = bytemuck::cast(valid.select(new, old));
-        };
-        ids(&mut h.prim_id, &from.prim_id);
-        ids(&mut h.geom_id, &from.geom_id);
+        sel_ids(&mut h.prim_id, valid, bytemuck::cast(from.prim_id));
+        sel_ids(&mut h.geom_id, valid, bytemuck::cast(from.geom_id));
         sel_id(&mut h.inst_id, valid, inst_id);
     }
 
@@ -157,11 +153,17 @@ fn sel(dst: &mut [f32; PACKET_WIDTH], valid: Pf, x: Pf) {
     *dst = valid.select(x, Pf::new(*dst)).to_array();
 }
 
+/// Writes the ids `ids` (as float bits) into the lanes of `valid`.
+#[inline(always)]
+fn sel_ids(dst: &mut [u32; PACKET_WIDTH], valid: Pf, ids: Pf) {
+    let old: Pf = bytemuck::cast(*dst);
+    *dst = bytemuck::cast(valid.select(ids, old));
+}
+
 /// Writes the id `id` into the lanes of `valid`.
 #[inline(always)]
 fn sel_id(dst: &mut [u32; PACKET_WIDTH], valid: Pf, id: u32) {
-    let old: Pf = bytemuck::cast(*dst);
-    *dst = bytemuck::cast(valid.select(Pf::splat(f32::from_bits(id)), old));
+    sel_ids(dst, valid, Pf::splat(f32::from_bits(id)));
 }
 
 /// Fixed-size traversal stack; no kernel allocates. Each thread keeps one (see [`with_stack`]):
