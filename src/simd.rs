@@ -58,6 +58,119 @@ macro_rules! bit_order {
 bit_order!(f32x8, i32x8, 8);
 bit_order!(f32x16, i32x16, 16);
 
+/// Fused multiply-add on lane vectors: `madd(a, b, c) = a·b + c`, `msub(a, b, c) = a·b − c`, one
+/// rounding each where the CPU has FMA (Embree's `madd`/`msub`).
+pub(crate) trait Fma: Copy + core::ops::Mul<Output = Self> {
+    fn madd(self, b: Self, c: Self) -> Self;
+    fn msub(self, b: Self, c: Self) -> Self;
+}
+
+macro_rules! fma {
+    ($($f:ty),*) => {$(
+        impl Fma for $f {
+            #[inline(always)]
+            fn madd(self, b: Self, c: Self) -> Self {
+                self.mul_add(b, c)
+            }
+            #[inline(always)]
+            fn msub(self, b: Self, c: Self) -> Self {
+                self.mul_sub(b, c)
+            }
+        }
+    )*};
+}
+fma!(f32x4, f32x8, f32x16);
+
+/// Near-to-far order of the children a ray enters in an 8-wide node, for closest-hit walks.
+///
+/// Each entered child gets the key `(bits of its entry distance with the low three cleared) | slot`:
+/// keys are distinct, and for non-negative distances they order like the distances up to the
+/// cleared bits (8 ulps; negative distances, from `tnear < 0`, order backwards among themselves,
+/// which costs visits, not hits). Children not entered get `i32::MAX`. The eight keys are sorted
+/// in registers by Batcher's 19-comparator network, then the entered children but the nearest
+/// are written farthest first with their exact distances: `node[..n − 1]` and `dist[..n − 1]` for
+/// `n` entered children (the later slots get unspecified values). Returns the nearest child.
+/// Embree does the same with AVX-512 (`traverseClosestHitAVX512VL8`: keys from the distance bits
+/// and the slot, ordered in registers); a network needs no branch on the number of children.
+///
+/// `hits` must have at least one of its low 8 bits set and no others.
+#[inline(always)]
+pub(crate) fn order8(tn: f32x8, hits: u32, child: &[u32; 8], node: &mut [u32; 8], dist: &mut [f32; 8]) -> u32 {
+    debug_assert!(hits != 0 && hits <= 0xff);
+    #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+    {
+        order8_avx2(tn, hits, child, node, dist)
+    }
+    #[cfg(not(all(target_arch = "x86_64", target_feature = "avx2")))]
+    {
+        order8_portable(tn, hits, child, node, dist)
+    }
+}
+
+/// [`order8`] in AVX2 registers: no memory besides the arguments, no branch.
+#[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+#[inline(always)]
+fn order8_avx2(tn: f32x8, hits: u32, child: &[u32; 8], node: &mut [u32; 8], dist: &mut [f32; 8]) -> u32 {
+    use core::arch::x86_64::*;
+    // SAFETY: the intrinsics need AVX2, which this build enables for every function (the `cfg`
+    // above is true only then); none of them reads or writes memory: vectors move in and out by
+    // value (`bytemuck` casts of plain 32-byte arrays).
+    unsafe {
+        let t: __m256i = bytemuck::cast(tn);
+        let step = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+        let bit = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+        let entered = _mm256_cmpeq_epi32(_mm256_and_si256(_mm256_set1_epi32(hits as i32), bit), bit);
+        let key = _mm256_or_si256(_mm256_and_si256(t, _mm256_set1_epi32(!7)), step);
+        let key = _mm256_blendv_epi8(_mm256_set1_epi32(i32::MAX), key, entered);
+        // One layer of comparators: lanes paired by a permutation, the lanes of `HI` take the maximum.
+        macro_rules! layer {
+            ($v:expr, $p:expr, $hi:literal) => {{
+                let (v, p) = ($v, $p);
+                _mm256_blend_epi32::<$hi>(_mm256_min_epi32(v, p), _mm256_max_epi32(v, p))
+            }};
+        }
+        let k = layer!(key, _mm256_shuffle_epi32::<0xB1>(key), 0xAA); // (0,1) (2,3) (4,5) (6,7)
+        let k = layer!(k, _mm256_shuffle_epi32::<0x4E>(k), 0xCC); // (0,2) (1,3) (4,6) (5,7)
+        let k = layer!(k, _mm256_shuffle_epi32::<0xD8>(k), 0x44); // (1,2) (5,6)
+        let k = layer!(k, _mm256_permute4x64_epi64::<0x4E>(k), 0xF0); // (0,4) (1,5) (2,6) (3,7)
+        let k = layer!(k, _mm256_permute4x64_epi64::<0xD8>(k), 0x30); // (2,4) (3,5)
+        let k = layer!(k, _mm256_permutevar8x32_epi32(k, _mm256_setr_epi32(0, 2, 1, 4, 3, 6, 5, 7)), 0x54); // (1,2) (3,4) (5,6)
+        // Lane i of the reversal takes sorted key n − 1 − i; `vpermd` reads the low three bits of an
+        // index only, so a key selects its own slot directly.
+        let n = hits.count_ones() as i32;
+        let rev = _mm256_permutevar8x32_epi32(k, _mm256_sub_epi32(_mm256_set1_epi32(n - 1), step));
+        let c: __m256i = bytemuck::cast(*child);
+        *node = bytemuck::cast(_mm256_permutevar8x32_epi32(c, rev));
+        *dist = bytemuck::cast(_mm256_permutevar8x32_ps(bytemuck::cast(tn), rev));
+        // The nearest by a reduction of its own (three steps instead of the network's six): the walk
+        // waits for it, the stack writes do not.
+        let m = _mm256_min_epi32(key, _mm256_shuffle_epi32::<0xB1>(key));
+        let m = _mm256_min_epi32(m, _mm256_shuffle_epi32::<0x4E>(m));
+        let m = _mm256_min_epi32(m, _mm256_permute4x64_epi64::<0x4E>(m));
+        child[(_mm256_cvtsi256_si32(m) & 7) as usize]
+    }
+}
+
+/// [`order8`] in scalar code, with the same keys and so the same order.
+#[cfg_attr(all(target_arch = "x86_64", target_feature = "avx2"), allow(dead_code))]
+fn order8_portable(tn: f32x8, hits: u32, child: &[u32; 8], node: &mut [u32; 8], dist: &mut [f32; 8]) -> u32 {
+    let t = tn.to_array();
+    let mut keys = [i32::MAX; 8];
+    for (i, k) in keys.iter_mut().enumerate() {
+        if hits & (1 << i) != 0 {
+            *k = (t[i].to_bits() as i32 & !7) | i as i32;
+        }
+    }
+    keys.sort_unstable();
+    let n = hits.count_ones() as usize;
+    for j in 0..n - 1 {
+        let s = (keys[n - 1 - j] & 7) as usize;
+        node[j] = child[s];
+        dist[j] = t[s];
+    }
+    child[(keys[0] & 7) as usize]
+}
+
 /// Lane count of a ray packet (K in Embree's naming): 16 rays, a 4×4 pixel tile.
 pub const PACKET_WIDTH: usize = 16;
 
@@ -211,6 +324,54 @@ mod tests {
         }
         // `-0.0` is the smallest value as bits: why exit distances stay float in the packet tests.
         assert_eq!(f32x8::splat(-0.0).min_bits(f32x8::splat(-3.0)).to_array()[0].to_bits(), (-0.0f32).to_bits());
+    }
+
+    #[test]
+    fn order8_sorts_entered_children_near_to_far() {
+        // Distances from a small set (ties between slots), negative ones and -0.0 included, under
+        // every mask; the kernel must match the scalar form and put the entered children in order.
+        let pool = [0.0f32, -0.0, 1.0, 1.0, 2.5, 1e-30, 7.0, 3.0, -2.0, 1e30, 0.5, 2.5];
+        let mut seed = 0x9e37_79b9u32;
+        let mut next = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 17;
+            seed ^= seed << 5;
+            seed
+        };
+        let child: [u32; 8] = std::array::from_fn(|i| 100 + i as u32);
+        for round in 0..2000 {
+            let d: [f32; 8] = std::array::from_fn(|_| pool[next() as usize % pool.len()]);
+            let hits = (round % 255) as u32 + 1;
+            let (mut n1, mut d1, mut n2, mut d2) = ([0; 8], [0.0; 8], [0; 8], [0.0; 8]);
+            let c1 = order8(f32x8::new(d), hits, &child, &mut n1, &mut d1);
+            let c2 = order8_portable(f32x8::new(d), hits, &child, &mut n2, &mut d2);
+            let n = hits.count_ones() as usize;
+            assert_eq!(c1, c2);
+            assert_eq!(n1[..n - 1], n2[..n - 1]);
+            assert_eq!(
+                d1[..n - 1].iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
+                d2[..n - 1].iter().map(|x| x.to_bits()).collect::<Vec<_>>()
+            );
+            // Every entered child exactly once, each with its own distance, farthest first.
+            let mut seen: Vec<u32> = n1[..n - 1].to_vec();
+            seen.push(c1);
+            seen.sort_unstable();
+            let want: Vec<u32> = (0..8).filter(|i| hits & (1 << i) != 0).map(|i| child[i]).collect();
+            assert_eq!(seen, want);
+            for j in 0..n - 1 {
+                assert_eq!(d1[j].to_bits(), d[(n1[j] - 100) as usize].to_bits());
+            }
+            let nonneg = |x: f32| x.is_sign_positive();
+            let order: Vec<f32> = n1[..n - 1].iter().rev().map(|&c| d[(c - 100) as usize]).collect();
+            let first = d[(c1 - 100) as usize];
+            if nonneg(first) && order.iter().all(|&x| nonneg(x)) {
+                let mut prev = first;
+                for &x in &order {
+                    assert!(x >= prev, "{d:?} {hits:#x}: {first} then {order:?}");
+                    prev = x;
+                }
+            }
+        }
     }
 
     #[test]

@@ -187,14 +187,17 @@ pub(crate) fn nearest(valid: f32x4, t: f32x4, u: f32x4, v: f32x4) -> Option<(usi
     Some((best, t[best], u.to_array()[best], v.to_array()[best]))
 }
 
+/// `a × b` in Embree's form (`vec3.h`): `msub(a.y, b.z, a.z·b.y)` per component, fused where the
+/// CPU has FMA: three multiplies and three fused operations instead of six and three.
 #[inline(always)]
-pub(crate) fn cross<T: Copy + core::ops::Mul<Output = T> + core::ops::Sub<Output = T>>(a: [T; 3], b: [T; 3]) -> [T; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+pub(crate) fn cross<T: Fma>(a: [T; 3], b: [T; 3]) -> [T; 3] {
+    [a[1].msub(b[2], a[2] * b[1]), a[2].msub(b[0], a[0] * b[2]), a[0].msub(b[1], a[1] * b[0])]
 }
 
+/// `a · b` in Embree's form: `madd(a.x, b.x, madd(a.y, b.y, a.z·b.z))`.
 #[inline(always)]
-pub(crate) fn dot<T: Copy + core::ops::Mul<Output = T> + core::ops::Add<Output = T>>(a: [T; 3], b: [T; 3]) -> T {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+pub(crate) fn dot<T: Fma>(a: [T; 3], b: [T; 3]) -> T {
+    a[0].madd(b[0], a[1].madd(b[1], a[2] * b[2]))
 }
 
 /// One ray against one triangle with `test`: `(t, u, v)` in `(tnear, tfar]`, as the BVH's leaves
