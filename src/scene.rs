@@ -94,6 +94,10 @@ impl Query for Scene {
         self.bvh.trace1::<true>(ray).is_some()
     }
 
+    fn intersect_incoherent(&self, ray: &Ray) -> Option<Hit> {
+        self.bvh.trace1_net::<false, true>(ray).map(|h| self.bvh.hit_record(&h))
+    }
+
     fn intersect_packet_each(&self, rays: &RayPacket, mut f: impl FnMut(usize, &Hit)) {
         let mut hits = HitPacket::default();
         let mask = self.bvh.trace_packet::<false>(rays, &mut hits);
@@ -145,6 +149,13 @@ pub trait Query: Sync {
 
     /// Whether anything lies on `ray` in `(tnear, tfar]`. Invalid rays are not occluded.
     fn occluded(&self, ray: &Ray) -> bool;
+
+    /// [`intersect`](Self::intersect) for one ray of many unrelated ones, as incoherent streams
+    /// trace them: the same answer, by a walk tuned for rays whose paths the branch predictor
+    /// cannot learn (see `order_children` in `src/bvh/traverse.rs`).
+    fn intersect_incoherent(&self, ray: &Ray) -> Option<Hit> {
+        self.intersect(ray)
+    }
 
     /// Calls `f(lane, hit)` for every active lane of `rays` that hits something (closest hit).
     fn intersect_packet_each(&self, rays: &RayPacket, f: impl FnMut(usize, &Hit));
@@ -253,7 +264,7 @@ fn intersect_range<Q: Query + ?Sized>(
         Coherence::Incoherent => {
             out.clear(0);
             for_each_by_octant(rays, start, n, |k, r| {
-                if let Some(h) = q.intersect(r) {
+                if let Some(h) = q.intersect_incoherent(r) {
                     out.set(k, &h);
                 }
             });

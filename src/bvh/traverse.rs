@@ -306,8 +306,14 @@ pub(crate) use dispatch;
 
 /// Descends into the nearest of the children in `mask` (distances `d`) and pushes the others,
 /// nearest on top (in any order for any-hit queries). Returns the child to visit next.
+///
+/// Three or more entered children are ordered by an insertion sort on the stack, or, with `NET`,
+/// by [`order8`]'s sorting network in registers, without branches. Incoherent streams take the
+/// network (diffuse rays: 6–8% faster on Sponza, Sibenik and conference); the single-ray API
+/// and packets keep the sort, whose branches predict well for coherent rays. See
+/// PERFORMANCE.md for the measurements, including an unexplained cost to the single-ray API.
 #[inline(always)]
-pub(super) fn order_children<const ANY: bool>(
+pub(super) fn order_children<const ANY: bool, const NET: bool>(
     stack: &mut Stack,
     sp: &mut usize,
     child: &[u32; WIDTH],
@@ -320,29 +326,37 @@ pub(super) fn order_children<const ANY: bool>(
     if rest == 0 {
         return child[i0];
     }
+    if ANY {
+        // Any hit: push all but the first, in slot order, and descend into the first.
+        mask = rest;
+        let d = d.to_array();
+        while mask != 0 {
+            let i = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            stack.put(sp, child[i], d[i]);
+        }
+        return child[i0];
+    }
+    let dd = d.to_array();
     // Two: descend into the nearer, push the farther.
-    if !ANY && rest & (rest - 1) == 0 {
+    if rest & (rest - 1) == 0 {
         let i1 = rest.trailing_zeros() as usize;
-        let dd = d.to_array();
         let (n, f) = if dd[i0] <= dd[i1] { (i0, i1) } else { (i1, i0) };
         stack.put(sp, child[f], dd[f]);
         return child[n];
     }
-    if !ANY {
-        // Three or more: ordered in registers, the farther ones pushed farthest first. (The
-        // insertion sort on the stack this replaces was a tenth of a diffuse ray's instructions
-        // on Sponza.)
+    if NET {
         return stack.put_ordered(sp, child, mask, d);
     }
-    // Any hit: push all but the first, in slot order, and descend into the first.
-    mask = rest;
-    let d = d.to_array();
+    // Push all, order them nearest on top, pop one.
+    let base = *sp;
     while mask != 0 {
         let i = mask.trailing_zeros() as usize;
         mask &= mask - 1;
-        stack.put(sp, child[i], d[i]);
+        stack.put(sp, child[i], dd[i]);
     }
-    child[i0]
+    stack.sort_from::<false>(base, *sp);
+    stack.take(sp).0
 }
 
 /// Bounds on the ray parameters of a whole packet whose rays share a direction octant: per axis,
@@ -550,28 +564,36 @@ impl Bvh {
     }
 
     /// Closest hit (`ANY = false`) or first hit found (`ANY = true`) of one ray.
+    #[inline(always)]
     pub fn trace1<const ANY: bool>(&self, ray: &Ray) -> Option<LeafHit> {
+        self.trace1_net::<ANY, false>(ray)
+    }
+
+    /// [`trace1`](Self::trace1), ordering children by the sorting network where `NET` (see
+    /// [`order_children`]).
+    #[inline(always)]
+    pub(crate) fn trace1_net<const ANY: bool, const NET: bool>(&self, ray: &Ray) -> Option<LeafHit> {
         if !ray.is_valid() || self.root == EMPTY {
             return None;
         }
-        with_stack(|stack| dispatch!(self.test, self.box_test, |K, C| self.trace1_with::<ANY, K, C>(ray, stack)))
+        with_stack(|stack| dispatch!(self.test, self.box_test, |K, C| self.trace1_with::<ANY, K, C, NET>(ray, stack)))
     }
 
     /// [`trace1`](Self::trace1) with a chosen kernel, on `stack` above its current entries; the
     /// ray must be valid.
     #[inline(never)]
-    pub(crate) fn trace1_with<const ANY: bool, K: Kernel, const CONS: bool>(
+    pub(crate) fn trace1_with<const ANY: bool, K: Kernel, const CONS: bool, const NET: bool>(
         &self,
         ray: &Ray,
         stack: &mut Stack,
     ) -> Option<LeafHit> {
-        self.trace1_from::<ANY, K, CONS>(ray, self.root, stack)
+        self.trace1_from::<ANY, K, CONS, NET>(ray, self.root, stack)
     }
 
     /// [`trace1_with`](Self::trace1_with) over the subtree at `root` (a node or a leaf): the
     /// whole tree, or the part a packet hands to its few lanes that enter it.
     #[inline(always)]
-    pub(crate) fn trace1_from<const ANY: bool, K: Kernel, const CONS: bool>(
+    pub(crate) fn trace1_from<const ANY: bool, K: Kernel, const CONS: bool, const NET: bool>(
         &self,
         ray: &Ray,
         root: u32,
@@ -586,7 +608,7 @@ impl Bvh {
         let br = BoxRay::new(ray);
         let mut tfar = ray.tfar;
         let mut best = None;
-        walk1::<ANY, CONS>(&self.nodes, &br, stack, base, &mut tfar, |leaf, tfar, _| {
+        walk1::<ANY, CONS, NET>(&self.nodes, &br, stack, base, &mut tfar, |leaf, tfar, _| {
             let (start, count) = leaf_blocks(leaf);
             for bi in start..start + count {
                 if let Some((lane, t, u, v)) = K::intersect1(&self.blocks[bi], &r4, &pre, ray.tnear, *tfar) {
@@ -653,7 +675,7 @@ impl Bvh {
                     lanes,
                     tfar,
                     |ray| {
-                        let h = self.trace1_from::<ANY, K, CONS>(ray, leaf, stack)?;
+                        let h = self.trace1_from::<ANY, K, CONS, false>(ray, leaf, stack)?;
                         Some((h.t, h))
                     },
                     |l, h| out.set(l, &self.hit_record(&h)),
@@ -783,7 +805,7 @@ impl BoxRay {
 /// `leaf(reference, tfar)` tests one leaf, may lower `tfar`, and returns true to end the walk (an
 /// any-hit query found its hit). Shared by triangle BVHs and the instance level above them.
 #[inline(always)]
-pub(crate) fn walk1<const ANY: bool, const CONS: bool>(
+pub(crate) fn walk1<const ANY: bool, const CONS: bool, const NET: bool>(
     nodes: &[Node],
     br: &BoxRay,
     stack: &mut Stack,
@@ -813,7 +835,7 @@ pub(crate) fn walk1<const ANY: bool, const CONS: bool>(
             if mask == 0 {
                 continue 'pop;
             }
-            cur = order_children::<ANY>(stack, &mut sp, &node.child, mask, tn);
+            cur = order_children::<ANY, NET>(stack, &mut sp, &node.child, mask, tn);
         }
     }
     stack.len = base;
@@ -1029,7 +1051,7 @@ pub(crate) fn walk_packet<const ANY: bool, const CONS: bool>(
                 if mask == 0 {
                     continue 'pop;
                 }
-                cur = order_children::<ANY>(stack, &mut sp, &child, mask, f32x8::new(d));
+                cur = order_children::<ANY, false>(stack, &mut sp, &child, mask, f32x8::new(d));
                 lanes = 0;
                 continue;
             }
