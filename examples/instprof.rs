@@ -1,6 +1,8 @@
 //! Profiling aid: traces a scene file's primary rays (packets and single rays) on one thread.
-//! `cargo run --release --example instprof -- data/forest.toml [packet|packet16|api1|api1d|single|diffuse|diffusep|shadow|shadow1|build] [repeats] [flat]`
-//! (`shadow` and `diffusep` trace as packets, `shadow1` and `diffuse` one ray at a time.)
+//! `cargo run --release --example instprof -- data/forest.toml [packet|packet16|api1|api1d|api1d2|api1par|single|diffuse|diffusep|shadow|shadow1|build] [repeats] [flat|inst]`
+//! (`shadow` and `diffusep` trace as packets, `shadow1` and `diffuse` one ray at a time; the `api1` modes call
+//! the single-ray API on the flattened scene, or with `inst` on the two-level one; `api1par` runs it on
+//! every rayon thread over chunks of 4,096 camera rays, as the harness does.)
 //! `MAX_LEAF`, `TRAV_COST`, `SPLIT` (spatial split factor) and `BOX=fast` override the build settings.
 use std::time::Instant;
 
@@ -89,12 +91,54 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         println!("packet16 (flat): {:.2} Mrays/s (1 thread, best of {repeats})", primary.len() as f64 / best / 1e6);
         return Ok(());
     }
+    if mode == "api1par" {
+        // The single-ray API on camera rays over chunks of 4,096 rays on all rayon threads, as the
+        // harness's `single` column runs it (`RAYON_NUM_THREADS` sets the threads).
+        use rayon::prelude::*;
+        let flat = scene.flatten(&cfg)?;
+        let n = primary.len();
+        let (mut t_out, mut g_out, mut p_out, mut i_out) =
+            (vec![0.0f32; n], vec![0u32; n], vec![0u32; n], vec![0u32; n]);
+        let mut best = f64::INFINITY;
+        for _ in 0..repeats {
+            let t = Instant::now();
+            (
+                t_out.par_chunks_mut(4096),
+                g_out.par_chunks_mut(4096),
+                p_out.par_chunks_mut(4096),
+                i_out.par_chunks_mut(4096),
+            )
+                .into_par_iter()
+                .enumerate()
+                .for_each(|(c, (t, g, p, i))| {
+                    for k in 0..t.len() {
+                        let h = flat.intersect(&primary.get(c * 4096 + k));
+                        (t[k], g[k], p[k], i[k]) =
+                            h.map_or((f32::INFINITY, !0, !0, !0), |h| (h.t, h.geom_id, h.prim_id, h.inst_id));
+                    }
+                });
+            best = best.min(t.elapsed().as_secs_f64());
+        }
+        std::hint::black_box(&t_out);
+        println!(
+            "api1par ({} threads): {:.2} Mrays/s (best of {repeats})",
+            rayon::current_num_threads(),
+            primary.len() as f64 / best / 1e6
+        );
+        return Ok(());
+    }
     if mode == "api1" || mode == "api1d" || mode == "api1d2" {
         // The single-ray API, one call per ray (as the harness's `single` column); `api1d2`
         // traces each diffuse ray twice in a row, the second time with a warm cache.
         let rays = if mode == "api1" { &primary } else { &diffuse };
         let twice = mode == "api1d2";
-        let flat = scene.flatten(&cfg)?;
+        // Flattened unless `inst` is given (then the two-level scene).
+        let inst = args.iter().any(|a| a == "inst");
+        let flat = if inst { None } else { Some(scene.flatten(&cfg)?) };
+        let q: &dyn Fn(&strahl::Ray) -> Option<strahl::Hit> = match &flat {
+            Some(f) => &|r| f.intersect(r),
+            None => &|r| scene.intersect(r),
+        };
         let mut best = f64::INFINITY;
         let mut sum = 0.0f32;
         for _ in 0..repeats {
@@ -102,17 +146,21 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             for i in 0..rays.len() {
                 // The whole hit, as the harness's answers take it (with `t` alone the compiler
                 // drops the hit record's normal and ids).
-                if let Some(h) = flat.intersect(&rays.get(i)) {
+                if let Some(h) = q(&rays.get(i)) {
                     sum += h.t + h.ng.x + (h.prim_id ^ h.geom_id) as f32;
                 }
-                if twice && let Some(h) = flat.intersect(&rays.get(i)) {
+                if twice && let Some(h) = q(&rays.get(i)) {
                     sum += h.t;
                 }
             }
             best = best.min(t.elapsed().as_secs_f64());
         }
         std::hint::black_box(sum);
-        println!("{mode} (flat): {:.2} Mrays/s (1 thread, best of {repeats})", rays.len() as f64 / best / 1e6);
+        println!(
+            "{mode} ({}): {:.2} Mrays/s (1 thread, best of {repeats})",
+            if inst { "instanced" } else { "flat" },
+            rays.len() as f64 / best / 1e6
+        );
         return Ok(());
     }
     let occlusion = mode.starts_with("shadow");

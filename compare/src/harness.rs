@@ -131,7 +131,8 @@ impl Answers {
         (self.t[i], self.geom[i], self.prim[i], self.inst[i]) = (t, g, p, n);
     }
 
-    /// Runs `f(start, slice)` over chunks of [`CHUNK`] entries in parallel.
+    /// Runs `f(start, slice)` over chunks of [`CHUNK`] entries in parallel, each chunk a job of
+    /// its own (see `strahl::scene::STREAM_CHUNK` for why).
     fn par_fill(&mut self, f: impl Fn(usize, &mut AnswerSlice<'_>) + Sync) {
         (
             self.t.par_chunks_mut(CHUNK),
@@ -141,6 +142,7 @@ impl Answers {
         )
             .into_par_iter()
             .enumerate()
+            .with_max_len(1)
             .for_each(|(k, (t, geom, prim, inst))| f(k * CHUNK, &mut AnswerSlice { t, geom, prim, inst }));
     }
 }
@@ -888,9 +890,9 @@ pub(crate) fn embree_packet(scene: &embree::Scene, rays: &RayStream, class: Clas
 fn embree_stream(scene: &embree::Scene, class: Class, rh: &mut [RTCRayHit], r: &mut [RTCRay]) {
     let coherent = class.coherent();
     if class.occlusion() {
-        r.par_chunks_mut(CHUNK).for_each(|c| scene.occluded1m(c, coherent));
+        r.par_chunks_mut(CHUNK).with_max_len(1).for_each(|c| scene.occluded1m(c, coherent));
     } else {
-        rh.par_chunks_mut(CHUNK).for_each(|c| scene.intersect1m(c, coherent));
+        rh.par_chunks_mut(CHUNK).with_max_len(1).for_each(|c| scene.intersect1m(c, coherent));
     }
 }
 
