@@ -39,6 +39,7 @@ pub mod raygen;
 pub mod scene;
 pub mod scene_file;
 pub mod simd;
+mod sys;
 
 pub use bvh::group::GROUP;
 pub use bvh::{BoxTest, BuildConfig, BuildStats};
