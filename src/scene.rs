@@ -34,8 +34,7 @@ pub enum Coherence {
 /// two threads split 256 chunks into pieces of 32–64 chunks that are never split again unless
 /// stolen, so one thread could sit idle while the other finished its last piece. In the harness,
 /// 2 threads, only the single-ray passes running, Sponza's single-ray API ran 10.6 Mrays/s that way
-/// and 14.25 with a job per chunk
-/// (Embree's `rtcIntersect1` in the same loop: 14.3 → 17.5).
+/// and 14.25 with a job per chunk (Embree's `rtcIntersect1` in the same loop: 14.3 → 17.5).
 pub const STREAM_CHUNK: usize = 4096;
 
 /// Meshes and the BVH over them.
