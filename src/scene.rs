@@ -156,6 +156,12 @@ pub trait Query: Sync {
     /// Whether anything lies on `ray` in `(tnear, tfar]`. Invalid rays are not occluded.
     fn occluded(&self, ray: &Ray) -> bool;
 
+    /// Whether incoherent streams are traced as packets of consecutive rays instead of single
+    /// rays in octant order: true for two-level scenes, whose instance level is then walked once
+    /// per packet and whose instance transforms are computed 16 lanes at once (Embree's stream
+    /// does the same with its packets of 16); the objects are still walked one ray at a time.
+    const INCOHERENT_PACKETS: bool = false;
+
     /// [`intersect`](Self::intersect) for one ray of many unrelated ones, as incoherent streams
     /// trace them: the same answer, by a walk tuned for rays whose paths the branch predictor
     /// cannot learn (see `order_children` in `src/bvh/traverse.rs`).
@@ -267,6 +273,20 @@ fn intersect_range<Q: Query + ?Sized>(
             for k in (whole..n).step_by(PACKET_WIDTH) {
                 let p = rays.packet(start + k, (n - k).min(PACKET_WIDTH));
                 q.intersect_packet_each(&p, |lane, h| out.set(k + lane, h));
+            }
+        }
+        Coherence::Incoherent if Q::INCOHERENT_PACKETS => {
+            let whole = n / PACKET_WIDTH * PACKET_WIDTH;
+            out.clear(whole);
+            let (mut p, mut h) = (RayPacket::default(), HitPacket::default());
+            for k in (0..whole).step_by(PACKET_WIDTH) {
+                rays.whole_packet_into(start + k, &mut p);
+                q.intersect_packet(&p, &mut h);
+                out.set_packet(k, &h);
+            }
+            if whole < n {
+                let p = rays.packet(start + whole, n - whole);
+                q.intersect_packet_each(&p, |lane, h| out.set(whole + lane, h));
             }
         }
         Coherence::Incoherent => {
