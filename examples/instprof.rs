@@ -1,6 +1,7 @@
 //! Profiling aid: traces a scene file's primary rays (packets and single rays) on one thread.
 //! `cargo run --release --example instprof -- data/forest.toml [packet|packet16|api1|api1d|api1d2|api1par|single|diffuse|diffusep|shadow|shadow1|build] [repeats] [flat|inst]`
-//! (`shadow` and `diffusep` trace as packets, `shadow1` and `diffuse` one ray at a time; the `api1` modes call
+//! (`shadow` and `diffusep` trace as packets, `shadow1` and `diffuse` one ray at a time; `ao` and `aop`
+//! ask whether the diffuse rays are occluded, one at a time and as packets; the `api1` modes call
 //! the single-ray API on the flattened scene, or with `inst` on the two-level one; `api1par` runs it on
 //! every rayon thread over chunks of 4,096 camera rays, as the harness does.)
 //! `MAX_LEAF`, `TRAV_COST`, `SPLIT` (spatial split factor) and `BOX=fast` override the build settings.
@@ -73,6 +74,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "diffusep" => (&diffuse, Coherence::Coherent),
         "shadow" => (&shadow, Coherence::Coherent),
         "shadow1" => (&shadow, Coherence::Incoherent),
+        "ao" => (&diffuse, Coherence::Incoherent),
+        "aop" => (&diffuse, Coherence::Coherent),
         _ => (&primary, Coherence::Coherent),
     };
     if mode == "packet16" {
@@ -163,7 +166,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         );
         return Ok(());
     }
-    let occlusion = mode.starts_with("shadow");
+    let occlusion = mode.starts_with("shadow") || mode.starts_with("ao");
     let mut occ = Vec::new();
     let flat = if args.iter().any(|a| a == "flat") { Some(scene.flatten(&cfg)?) } else { None };
     let mut best = f64::INFINITY;
