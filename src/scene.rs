@@ -193,8 +193,9 @@ pub trait Query: Sync {
     /// [`intersect_group_each`](Self::intersect_group_each)); lanes without a hit are written as
     /// misses.
     fn intersect_group(&self, rays: &[RayPacket; GROUP], hits: &mut [HitPacket; GROUP]) {
-        *hits = [HitPacket::default(); GROUP];
-        self.intersect_group_each(rays, |i, lane, h| hits[i].set(lane, Some(*h)));
+        for (p, h) in rays.iter().zip(hits.iter_mut()) {
+            self.intersect_packet(p, h);
+        }
     }
 
     /// Closest hits of the active lanes of `rays`; inactive lanes are written as misses.
@@ -257,50 +258,33 @@ fn intersect_range<Q: Query + ?Sized>(
     coherence: Coherence,
 ) {
     let n = out.len();
-    match coherence {
-        Coherence::Coherent => {
-            const G: usize = GROUP * PACKET_WIDTH;
-            let whole = n / G * G;
-            // Whole groups write every entry.
-            out.clear(whole);
-            let mut ps = [RayPacket::default(); GROUP];
-            let mut hs = [HitPacket::default(); GROUP];
-            for k in (0..whole).step_by(G) {
-                for (i, p) in ps.iter_mut().enumerate() {
-                    rays.whole_packet_into(start + k + i * PACKET_WIDTH, p);
-                }
-                q.intersect_group(&ps, &mut hs);
-                for (i, h) in hs.iter().enumerate() {
-                    out.set_packet(k + i * PACKET_WIDTH, h);
-                }
+    if coherence == Coherence::Coherent || Q::INCOHERENT_PACKETS {
+        const G: usize = GROUP * PACKET_WIDTH;
+        let whole = n / G * G;
+        // Whole groups write every entry.
+        out.clear(whole);
+        let mut ps = [RayPacket::default(); GROUP];
+        let mut hs = [HitPacket::default(); GROUP];
+        for k in (0..whole).step_by(G) {
+            for (i, p) in ps.iter_mut().enumerate() {
+                rays.whole_packet_into(start + k + i * PACKET_WIDTH, p);
             }
-            for k in (whole..n).step_by(PACKET_WIDTH) {
-                let p = rays.packet(start + k, (n - k).min(PACKET_WIDTH));
-                q.intersect_packet_each(&p, |lane, h| out.set(k + lane, h));
+            q.intersect_group(&ps, &mut hs);
+            for (i, h) in hs.iter().enumerate() {
+                out.set_packet(k + i * PACKET_WIDTH, h);
             }
         }
-        Coherence::Incoherent if Q::INCOHERENT_PACKETS => {
-            let whole = n / PACKET_WIDTH * PACKET_WIDTH;
-            out.clear(whole);
-            let (mut p, mut h) = (RayPacket::default(), HitPacket::default());
-            for k in (0..whole).step_by(PACKET_WIDTH) {
-                rays.whole_packet_into(start + k, &mut p);
-                q.intersect_packet(&p, &mut h);
-                out.set_packet(k, &h);
-            }
-            if whole < n {
-                let p = rays.packet(start + whole, n - whole);
-                q.intersect_packet_each(&p, |lane, h| out.set(whole + lane, h));
-            }
+        for k in (whole..n).step_by(PACKET_WIDTH) {
+            let p = rays.packet(start + k, (n - k).min(PACKET_WIDTH));
+            q.intersect_packet_each(&p, |lane, h| out.set(k + lane, h));
         }
-        Coherence::Incoherent => {
-            out.clear(0);
-            for_each_by_octant(rays, start, n, |k, r| {
-                if let Some(h) = q.intersect_incoherent(r) {
-                    out.set(k, &h);
-                }
-            });
-        }
+    } else {
+        out.clear(0);
+        for_each_by_octant(rays, start, n, |k, r| {
+            if let Some(h) = q.intersect_incoherent(r) {
+                out.set(k, &h);
+            }
+        });
     }
 }
 
@@ -367,8 +351,8 @@ fn occluded_range<Q: Query + ?Sized>(q: &Q, rays: &RayStream, start: usize, out:
         return;
     }
     // Incoherent rays of a flat scene: 16 consecutive rays in one direction octant (shadow rays
-    // towards one light, mostly) still go as a packet, with its frustum; the others one at a time,
-    // in octant order.
+    // towards one light, mostly) still go as a packet, tested per lane (they share no origin, so
+    // no frustum); the others one at a time, in octant order.
     let mut oct = [0u8; OCTANT_GROUP];
     let mut rest = [0u16; OCTANT_GROUP];
     let mut order = [0u16; OCTANT_GROUP];
