@@ -263,26 +263,26 @@ impl InstancedScene {
         best
     }
 
-    fn trace1<const ANY: bool, const NET: bool>(&self, ray: &Ray) -> Option<(u32, LeafHit)> {
+    fn trace1<const ANY: bool>(&self, ray: &Ray) -> Option<(u32, LeafHit)> {
         if !ray.is_valid() || self.root == EMPTY {
             return None;
         }
-        with_stack(|stack| dispatch!(self.test, self.box_test, |K, C| self.trace1_with::<ANY, K, C, NET>(ray, stack)))
+        with_stack(|stack| dispatch!(self.test, self.box_test, |K, C| self.trace1_with::<ANY, K, C>(ray, stack)))
     }
 
     /// The instance level's walk; at each instance the object's walk continues on the same stack
     /// with the same kernel, so entering an instance costs one transform and no dispatch.
-    fn trace1_with<const ANY: bool, K: Kernel, const CONS: bool, const NET: bool>(
+    fn trace1_with<const ANY: bool, K: Kernel, const CONS: bool>(
         &self,
         ray: &Ray,
         stack: &mut Stack,
     ) -> Option<(u32, LeafHit)> {
-        self.trace1_from::<ANY, K, CONS, NET>(ray, self.root, stack)
+        self.trace1_from::<ANY, K, CONS>(ray, self.root, stack)
     }
 
     /// [`trace1_with`](Self::trace1_with) over the instance subtree at `root`.
     #[inline(always)]
-    fn trace1_from<const ANY: bool, K: Kernel, const CONS: bool, const NET: bool>(
+    fn trace1_from<const ANY: bool, K: Kernel, const CONS: bool>(
         &self,
         ray: &Ray,
         root: u32,
@@ -292,7 +292,7 @@ impl InstancedScene {
         let mut tfar = ray.tfar;
         let mut best = None;
         let base = stack.push_root(root);
-        walk1::<ANY, CONS, NET>(&self.nodes, &br, stack, base, &mut tfar, |leaf, tfar, stack| {
+        walk1::<ANY, CONS, false>(&self.nodes, &br, stack, base, &mut tfar, |leaf, tfar, stack| {
             let (start, count) = leaf_blocks(leaf);
             for k in start..start + count {
                 let p = &self.placed[k];
@@ -301,7 +301,7 @@ impl InstancedScene {
                 if !(r.origin.is_finite() && r.dir.is_finite()) {
                     continue;
                 }
-                if let Some(h) = self.objects[p.object as usize].bvh().trace1_with::<ANY, K, CONS, NET>(&r, stack) {
+                if let Some(h) = self.objects[p.object as usize].bvh().trace1_with::<ANY, K, CONS, false>(&r, stack) {
                     *tfar = h.t;
                     best = Some((k as u32, h));
                     if ANY {
@@ -346,7 +346,7 @@ impl InstancedScene {
                     lanes,
                     tfar,
                     |ray| {
-                        let (k, h) = self.trace1_from::<ANY, K, CONS, false>(ray, leaf, stack)?;
+                        let (k, h) = self.trace1_from::<ANY, K, CONS>(ray, leaf, stack)?;
                         Some((h.t, (k, h)))
                     },
                     |l, (k, h)| out.set(l, &self.world_hit(k, &self.object_hit(k, &h))),
@@ -491,15 +491,11 @@ impl Query for InstancedScene {
     const INCOHERENT_PACKETS: bool = true;
 
     fn intersect(&self, ray: &Ray) -> Option<Hit> {
-        self.trace1::<false, false>(ray).map(|(k, h)| self.world_hit(k, &self.object_hit(k, &h)))
+        self.trace1::<false>(ray).map(|(k, h)| self.world_hit(k, &self.object_hit(k, &h)))
     }
 
     fn occluded(&self, ray: &Ray) -> bool {
-        self.trace1::<true, false>(ray).is_some()
-    }
-
-    fn intersect_incoherent(&self, ray: &Ray) -> Option<Hit> {
-        self.trace1::<false, true>(ray).map(|(k, h)| self.world_hit(k, &self.object_hit(k, &h)))
+        self.trace1::<true>(ray).is_some()
     }
 
     fn intersect_packet_each(&self, rays: &RayPacket, mut f: impl FnMut(usize, &Hit)) {
