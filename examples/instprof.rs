@@ -1,7 +1,8 @@
 //! Profiling aid: traces a scene file's primary rays (packets and single rays) on one thread.
 //! `cargo run --release --example instprof -- data/forest.toml [packet|packet16|api1|api1d|api1d2|api1par|single|diffuse|diffusep|shadow|shadow1|build] [repeats] [flat|inst]`
 //! (`shadow` and `diffusep` trace as packets, `shadow1` and `diffuse` one ray at a time; `ao` and `aop`
-//! ask whether the diffuse rays are occluded, one at a time and as packets; the `api1` modes call
+//! ask whether the diffuse rays are occluded, one at a time and as packets; `diffuseo` and `aoo` trace
+//! the diffuse rays pre-sorted by direction octant in groups of 4,096, as consecutive packets; the `api1` modes call
 //! the single-ray API on the flattened scene, or with `inst` on the two-level one; `api1par` runs it on
 //! every rayon thread over chunks of 4,096 camera rays, as the harness does.)
 //! `MAX_LEAF`, `TRAV_COST`, `SPLIT` (spatial split factor) and `BOX=fast` override the build settings.
@@ -68,7 +69,24 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (diffuse, _) = raygen::diffuse(&primary, &hits, 1, 1e-4 * diag);
     let light = file.lights.first().map(|l| l.position).unwrap_or(cam.eye + glam::Vec3::Y);
     let (shadow, _) = raygen::shadow_with(&primary, &hits, light, raygen::Offset::Normal);
+    // The diffuse rays ordered by direction octant within groups of 4,096 (`diffuseo`, `aoo`).
+    let mut diffuse_oct = strahl::RayStream::default();
+    for g in (0..diffuse.len()).step_by(4096) {
+        let m = (diffuse.len() - g).min(4096);
+        let oct = |i: usize| {
+            let d = diffuse.get(i).dir;
+            (d.x < 0.0) as u8 | ((d.y < 0.0) as u8) << 1 | ((d.z < 0.0) as u8) << 2
+        };
+        for o in 0..8 {
+            for i in g..g + m {
+                if oct(i) == o {
+                    diffuse_oct.push(&diffuse.get(i));
+                }
+            }
+        }
+    }
     let (rays, coherence) = match mode.as_str() {
+        "diffuseo" => (&diffuse_oct, Coherence::Coherent),
         "single" => (&primary, Coherence::Incoherent),
         "diffuse" => (&diffuse, Coherence::Incoherent),
         "diffusep" => (&diffuse, Coherence::Coherent),
@@ -76,6 +94,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "shadow1" => (&shadow, Coherence::Incoherent),
         "ao" => (&diffuse, Coherence::Incoherent),
         "aop" => (&diffuse, Coherence::Coherent),
+        "aoo" => (&diffuse_oct, Coherence::Coherent),
         _ => (&primary, Coherence::Coherent),
     };
     if mode == "packet16" {

@@ -292,7 +292,7 @@ impl InstancedScene {
         let mut tfar = ray.tfar;
         let mut best = None;
         let base = stack.push_root(root);
-        walk1::<ANY, CONS, false>(&self.nodes, &br, stack, base, &mut tfar, |leaf, tfar, stack| {
+        walk1::<ANY, CONS>(&self.nodes, &br, stack, base, &mut tfar, |leaf, tfar, stack| {
             let (start, count) = leaf_blocks(leaf);
             for k in start..start + count {
                 let p = &self.placed[k];
@@ -301,7 +301,7 @@ impl InstancedScene {
                 if !(r.origin.is_finite() && r.dir.is_finite()) {
                     continue;
                 }
-                if let Some(h) = self.objects[p.object as usize].bvh().trace1_with::<ANY, K, CONS, false>(&r, stack) {
+                if let Some(h) = self.objects[p.object as usize].bvh().trace1_with::<ANY, K, CONS>(&r, stack) {
                     *tfar = h.t;
                     best = Some((k as u32, h));
                     if ANY {
@@ -374,7 +374,7 @@ impl InstancedScene {
                         active,
                         tfar,
                         |ray| {
-                            let h = bvh.trace1_from::<false, K, CONS, false>(ray, bvh.root, stack)?;
+                            let h = bvh.trace1_from::<false, K, CONS>(ray, bvh.root, stack)?;
                             Some((h.t, h))
                         },
                         |l, h| out.set(l, &self.world_hit(k as u32, &bvh.hit_record(&h))),

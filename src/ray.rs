@@ -322,6 +322,27 @@ impl RayStream {
         p.active = crate::simd::low_bits(PACKET_WIDTH);
     }
 
+    /// The rays `base + ids[lane]` as the lanes of `p` (at most [`PACKET_WIDTH`]; the lanes
+    /// past `ids.len()` inactive). The indices must lie in the stream.
+    pub(crate) fn gather_packet_into(&self, base: usize, ids: &[u16], p: &mut RayPacket) {
+        let n = ids.len().min(PACKET_WIDTH);
+        let g = |dst: &mut [f32; PACKET_WIDTH], a: &[f32]| {
+            let a = &a[base..];
+            for (d, &i) in dst.iter_mut().zip(&ids[..n]) {
+                *d = a[i as usize];
+            }
+        };
+        g(&mut p.ox, &self.ox);
+        g(&mut p.oy, &self.oy);
+        g(&mut p.oz, &self.oz);
+        g(&mut p.dx, &self.dx);
+        g(&mut p.dy, &self.dy);
+        g(&mut p.dz, &self.dz);
+        g(&mut p.tnear, &self.tnear);
+        g(&mut p.tfar, &self.tfar);
+        p.active = crate::simd::low_bits(n);
+    }
+
     /// The rays `start..start + n` (clamped to the stream) as a packet.
     pub fn packet(&self, start: usize, n: usize) -> RayPacket {
         let n = n.min(PACKET_WIDTH).min(self.len().saturating_sub(start));

@@ -248,20 +248,6 @@ impl Stack {
         Pf::new(self.lane_dist[sp & (STACK - 1)].0)
     }
 
-    /// Pushes the children of `hits` (at least two) but the nearest, farthest first, so that the
-    /// nearer ones pop first, and returns the nearest (see [`order8`]).
-    #[inline(always)]
-    fn put_ordered(&mut self, sp: &mut usize, child: &[u32; WIDTH], hits: u32, d: f32x8) -> u32 {
-        debug_assert!(*sp + WIDTH <= STACK);
-        let i = *sp & (STACK - 1);
-        let (node, dist) = (&mut self.node[i..i + WIDTH], &mut self.dist[i..i + WIDTH]);
-        let (Ok(node), Ok(dist)) = (<&mut [u32; WIDTH]>::try_from(node), <&mut [f32; WIDTH]>::try_from(dist)) else {
-            unreachable!("both slices are WIDTH long")
-        };
-        *sp += hits.count_ones() as usize - 1;
-        order8(d, hits, child, node, dist)
-    }
-
     /// Pops the top entry; `sp` must be above zero.
     #[inline(always)]
     pub(super) fn take(&self, sp: &mut usize) -> (u32, f32) {
@@ -337,13 +323,11 @@ pub(crate) use dispatch;
 /// Descends into the nearest of the children in `mask` (distances `d`) and pushes the others,
 /// nearest on top (in any order for any-hit queries). Returns the child to visit next.
 ///
-/// Three or more entered children are ordered by an insertion sort on the stack, or, with `NET`,
-/// by [`order8`]'s sorting network in registers, without branches. Incoherent streams take the
-/// network (diffuse rays: 6–8% faster on Sponza, Sibenik and conference); the single-ray API
-/// and packets keep the sort, whose branches predict well for coherent rays. See
-/// PERFORMANCE.md for the measurements, including an unexplained cost to the single-ray API.
+/// Three or more entered children are ordered by an insertion sort on the stack. A branch-free
+/// sorting network in registers was faster for single-ray diffuse streams but slower for the
+/// single-ray API; it went when incoherent streams became octant-sorted packets (PERFORMANCE.md).
 #[inline(always)]
-pub(super) fn order_children<const ANY: bool, const NET: bool>(
+pub(super) fn order_children<const ANY: bool>(
     stack: &mut Stack,
     sp: &mut usize,
     child: &[u32; WIDTH],
@@ -374,9 +358,6 @@ pub(super) fn order_children<const ANY: bool, const NET: bool>(
         let (n, f) = if dd[i0] <= dd[i1] { (i0, i1) } else { (i1, i0) };
         stack.put(sp, child[f], dd[f]);
         return child[n];
-    }
-    if NET {
-        return stack.put_ordered(sp, child, mask, d);
     }
     // Push all, order them nearest on top, pop one.
     let base = *sp;
@@ -596,34 +577,27 @@ impl Bvh {
     /// Closest hit (`ANY = false`) or first hit found (`ANY = true`) of one ray.
     #[inline(always)]
     pub fn trace1<const ANY: bool>(&self, ray: &Ray) -> Option<LeafHit> {
-        self.trace1_net::<ANY, false>(ray)
-    }
-
-    /// [`trace1`](Self::trace1), ordering children by the sorting network where `NET` (see
-    /// [`order_children`]).
-    #[inline(always)]
-    pub(crate) fn trace1_net<const ANY: bool, const NET: bool>(&self, ray: &Ray) -> Option<LeafHit> {
         if !ray.is_valid() || self.root == EMPTY {
             return None;
         }
-        with_stack(|stack| dispatch!(self.test, self.box_test, |K, C| self.trace1_with::<ANY, K, C, NET>(ray, stack)))
+        with_stack(|stack| dispatch!(self.test, self.box_test, |K, C| self.trace1_with::<ANY, K, C>(ray, stack)))
     }
 
     /// [`trace1`](Self::trace1) with a chosen kernel, on `stack` above its current entries; the
     /// ray must be valid.
     #[inline(never)]
-    pub(crate) fn trace1_with<const ANY: bool, K: Kernel, const CONS: bool, const NET: bool>(
+    pub(crate) fn trace1_with<const ANY: bool, K: Kernel, const CONS: bool>(
         &self,
         ray: &Ray,
         stack: &mut Stack,
     ) -> Option<LeafHit> {
-        self.trace1_from::<ANY, K, CONS, NET>(ray, self.root, stack)
+        self.trace1_from::<ANY, K, CONS>(ray, self.root, stack)
     }
 
     /// [`trace1_with`](Self::trace1_with) over the subtree at `root` (a node or a leaf): the
     /// whole tree, or the part a packet hands to its few lanes that enter it.
     #[inline(always)]
-    pub(crate) fn trace1_from<const ANY: bool, K: Kernel, const CONS: bool, const NET: bool>(
+    pub(crate) fn trace1_from<const ANY: bool, K: Kernel, const CONS: bool>(
         &self,
         ray: &Ray,
         root: u32,
@@ -638,7 +612,7 @@ impl Bvh {
         let br = BoxRay::new(ray);
         let mut tfar = ray.tfar;
         let mut best = None;
-        walk1::<ANY, CONS, NET>(&self.nodes, &br, stack, base, &mut tfar, |leaf, tfar, _| {
+        walk1::<ANY, CONS>(&self.nodes, &br, stack, base, &mut tfar, |leaf, tfar, _| {
             let (start, count) = leaf_blocks(leaf);
             for bi in start..start + count {
                 if let Some((lane, t, u, v)) = K::intersect1(&self.blocks[bi], &r4, &pre, ray.tnear, *tfar) {
@@ -705,7 +679,7 @@ impl Bvh {
                     lanes,
                     tfar,
                     |ray| {
-                        let h = self.trace1_from::<ANY, K, CONS, false>(ray, leaf, stack)?;
+                        let h = self.trace1_from::<ANY, K, CONS>(ray, leaf, stack)?;
                         Some((h.t, h))
                     },
                     |l, h| out.set(l, &self.hit_record(&h)),
@@ -835,7 +809,7 @@ impl BoxRay {
 /// `leaf(reference, tfar)` tests one leaf, may lower `tfar`, and returns true to end the walk (an
 /// any-hit query found its hit). Shared by triangle BVHs and the instance level above them.
 #[inline(always)]
-pub(crate) fn walk1<const ANY: bool, const CONS: bool, const NET: bool>(
+pub(crate) fn walk1<const ANY: bool, const CONS: bool>(
     nodes: &[Node],
     br: &BoxRay,
     stack: &mut Stack,
@@ -865,7 +839,7 @@ pub(crate) fn walk1<const ANY: bool, const CONS: bool, const NET: bool>(
             if mask == 0 {
                 continue 'pop;
             }
-            cur = order_children::<ANY, NET>(stack, &mut sp, &node.child, mask, tn);
+            cur = order_children::<ANY>(stack, &mut sp, &node.child, mask, tn);
         }
     }
     stack.len = base;
@@ -1087,7 +1061,7 @@ pub(crate) fn walk_packet<const ANY: bool, const CONS: bool>(
                 if mask == 0 {
                     continue 'pop;
                 }
-                cur = order_children::<ANY, false>(stack, &mut sp, &child, mask, f32x8::new(d));
+                cur = order_children::<ANY>(stack, &mut sp, &child, mask, f32x8::new(d));
                 lanes = 0;
                 continue;
             }
