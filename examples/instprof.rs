@@ -3,7 +3,7 @@
 //! (`shadow` and `diffusep` trace as packets, `shadow1` and `diffuse` one ray at a time; `ao` and `aop`
 //! ask whether the diffuse rays are occluded, one at a time and as packets; `diffuseo` and `aoo` trace
 //! the diffuse rays pre-sorted by direction octant in groups of 4,096, as consecutive packets; the `api1` modes call
-//! the single-ray API on the flattened scene, or with `inst` on the two-level one; `api1par` runs it on
+//! the single-ray API (`api1do` on the octant-sorted diffuse rays) on the flattened scene, or with `inst` on the two-level one; `api1par` runs it on
 //! every rayon thread over chunks of 4,096 camera rays, as the harness does.)
 //! `MAX_LEAF`, `TRAV_COST`, `SPLIT` (spatial split factor) and `BOX=fast` override the build settings.
 use std::time::Instant;
@@ -149,10 +149,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         );
         return Ok(());
     }
-    if mode == "api1" || mode == "api1d" || mode == "api1d2" {
+    if mode == "api1" || mode == "api1d" || mode == "api1d2" || mode == "api1do" {
         // The single-ray API, one call per ray (as the harness's `single` column); `api1d2`
         // traces each diffuse ray twice in a row, the second time with a warm cache.
-        let rays = if mode == "api1" { &primary } else { &diffuse };
+        let rays = match mode.as_str() {
+            "api1" => &primary,
+            "api1do" => &diffuse_oct,
+            _ => &diffuse,
+        };
         let twice = mode == "api1d2";
         // Flattened unless `inst` is given (then the two-level scene).
         let inst = args.iter().any(|a| a == "inst");
