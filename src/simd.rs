@@ -11,6 +11,28 @@ use wide::i32x16;
 pub(crate) use wide::{bytemuck, i32x8};
 pub(crate) use wide::{f32x4, f32x8, f32x16};
 
+/// Asks the processor to bring the cache lines of `*p` (up to 256 bytes) into the L1 cache: a hint
+/// that does not change what the program computes.
+#[inline(always)]
+pub(crate) fn prefetch<T>(p: &T) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use core::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+        let p = (p as *const T).cast::<i8>();
+        let n = core::mem::size_of::<T>().min(256);
+        let mut off = 0;
+        while off < n {
+            // SAFETY: a prefetch never faults and reads nothing the program can observe, whatever
+            // the address; `p.wrapping_add(off)` stays within `*p`'s size, so no pointer
+            // arithmetic overflows either.
+            unsafe { _mm_prefetch::<_MM_HINT_T0>(p.wrapping_add(off)) };
+            off += 64;
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = p;
+}
+
 /// Minima, maxima and `<=` of floats compared as signed integers: one-cycle `vpmaxsd`/`vpminsd`
 /// instead of four-cycle `vmaxps`/`vminps` on the traversal's critical path (Embree's
 /// `maxi`/`mini`). Non-negative floats order like their bit patterns; negative ones order

@@ -31,6 +31,29 @@ fn all_apis_agree(scene: &Scene, rays: &RayStream, what: &str) {
         }
         assert_eq!(occ & !p.active, 0, "inactive lanes are never occluded");
     }
+    // Octant groups of up to 32 rays walked together (the occlusion stream of large scenes), with
+    // one ray of another octant slipped into every third group: it is walked alone.
+    let octant = |i: usize| {
+        let r = rays.get(i);
+        (r.dir.x.is_sign_negative() as u32)
+            | (r.dir.y.is_sign_negative() as u32) << 1
+            | (r.dir.z.is_sign_negative() as u32) << 2
+    };
+    for o in 0..8 {
+        let ids: Vec<u16> = (0..n.min(u16::MAX as usize)).filter(|&i| octant(i) == o).map(|i| i as u16).collect();
+        for (k, chunk) in ids.chunks(31).enumerate() {
+            let mut group = chunk.to_vec();
+            if k % 3 == 2
+                && let Some(other) = (0..n.min(u16::MAX as usize)).find(|&i| octant(i) != o)
+            {
+                group.push(other as u16);
+            }
+            let bits = scene.occluded_octant_rays(rays, 0, &group, o);
+            for (lane, &id) in group.iter().enumerate() {
+                assert_eq!(bits & (1 << lane) != 0, single_occ[id as usize], "{what}: octant group, ray {id}");
+            }
+        }
+    }
     for coherence in [Coherence::Coherent, Coherence::Incoherent] {
         let mut a = HitStream::default();
         let mut b = HitStream::default();

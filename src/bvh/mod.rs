@@ -6,6 +6,7 @@ pub mod build;
 pub(crate) mod group;
 pub(crate) mod node;
 mod spatial;
+pub(crate) mod stream;
 pub(crate) mod traverse;
 
 use std::time::Instant;

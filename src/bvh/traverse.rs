@@ -57,7 +57,7 @@ impl BoxTest {
 const MIN_RCP_INPUT: f32 = 1e-18;
 
 /// Relative widening of the far plane distance: 16 ulps, well above the 2–3 roundings involved.
-const WIDEN: f32 = 1.0 / (1u32 << 20) as f32;
+pub(super) const WIDEN: f32 = 1.0 / (1u32 << 20) as f32;
 
 /// Stack entries: at most `WIDTH − 1` pushes per wide level; SAH levels are capped at
 /// `MEDIAN_DEPTH` and median levels below halve the set (at most 32 binary, so 32 wide levels).
@@ -67,7 +67,7 @@ const WIDEN: f32 = 1.0 / (1u32 << 20) as f32;
 const STACK: usize = (2 * ((MEDIAN_DEPTH + 33) * (WIDTH - 1) + 1)).next_power_of_two();
 
 #[inline(always)]
-fn safe_rcp(d: f32) -> f32 {
+pub(super) fn safe_rcp(d: f32) -> f32 {
     let d = if d.abs() < MIN_RCP_INPUT { MIN_RCP_INPUT.copysign(d) } else { d };
     1.0 / d
 }
@@ -246,6 +246,21 @@ impl Stack {
     #[inline(always)]
     fn lane_dist_at(&self, sp: usize) -> Pf {
         Pf::new(self.lane_dist[sp & (STACK - 1)].0)
+    }
+
+    /// Pushes `node` with a mask of stream rays (an occlusion stream's entry; see
+    /// [`occluded_stream`](Bvh::occluded_stream)). The mask goes in the distance slot, which
+    /// such walks never compare.
+    #[inline(always)]
+    pub(super) fn put_mask(&mut self, sp: &mut usize, node: u32, mask: u32) {
+        self.put(sp, node, f32::from_bits(mask));
+    }
+
+    /// Pops an entry pushed by [`put_mask`](Self::put_mask); `sp` must be above zero.
+    #[inline(always)]
+    pub(super) fn take_mask(&self, sp: &mut usize) -> (u32, u32) {
+        let (node, mask) = self.take(sp);
+        (node, mask.to_bits())
     }
 
     /// Pops the top entry; `sp` must be above zero.
