@@ -123,8 +123,8 @@ impl Query for Scene {
     /// Trees of more than [`STREAM_MIN_BYTES`]. Below that, nodes come from the cache, and
     /// packets of 16 (with their frustum) and single rays beat the per-ray node tests: shadow
     /// rays, 2 threads, Sponza 73 against 40 Mrays/s, igea 29 against 25. Above it the groups
-    /// fetch each node once for all their rays and prefetch the children they push: the
-    /// sphereflake's 1M triangles 17 against 21 Mrays/s, 11M 7.6 against 11.4 (PERFORMANCE.md).
+    /// fetch each node once for all their rays and prefetch the children they push: on the
+    /// 11M-triangle sphereflake 12.4 against 8.3 Mrays/s (PERFORMANCE.md).
     fn occlusion_streams(&self) -> bool {
         self.bvh.stats.bytes > STREAM_MIN_BYTES
     }
