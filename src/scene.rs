@@ -120,7 +120,7 @@ impl Query for Scene {
         self.bvh.trace_packet::<true>(rays, &mut HitPacket::default())
     }
 
-    /// Trees of more than [`STREAM_MIN_BYTES`]. Below that, nodes come from the cache, and
+    /// Trees of more than 32 MiB (`STREAM_MIN_BYTES`). Below that, nodes come from the cache, and
     /// packets of 16 (with their frustum) and single rays beat the per-ray node tests: shadow
     /// rays, 2 threads, Sponza 73 against 40 Mrays/s, igea 29 against 25. Above it the groups
     /// fetch each node once for all their rays and prefetch the children they push: on the
@@ -188,12 +188,17 @@ pub trait Query: Sync {
         false
     }
 
-    /// Occlusion of the rays `base + ids[i]` of `rays` (at most 32), which share the direction
-    /// octant `octant` (see [`octant_of_dir`]): bit `i` set where ray `i` is occluded. Flat scenes walk
-    /// them together (Embree's occlusion stream); the default asks one ray at a time.
+    /// Occlusion of the rays `base + ids[i]` of `rays`: bit `i` set where ray `i` is occluded. At
+    /// most 32 rays: those beyond are not traced and read as not occluded. The rays should share
+    /// the direction octant `octant` (bit `a` set where the sign bit of direction component `a`
+    /// is, `-0.0` included); a ray outside it is answered alone. Flat scenes walk the rays
+    /// together (Embree's occlusion stream); the default asks one ray at a time.
     fn occluded_octant_rays(&self, rays: &RayStream, base: usize, ids: &[u16], octant: u32) -> u32 {
         let _ = octant;
-        ids.iter().enumerate().fold(0, |m, (i, &id)| m | (self.occluded(&rays.get(base + id as usize)) as u32) << i)
+        ids.iter()
+            .take(32)
+            .enumerate()
+            .fold(0, |m, (i, &id)| m | (self.occluded(&rays.get(base + id as usize)) as u32) << i)
     }
 
     /// Calls `f(lane, hit)` for every active lane of `rays` that hits something (closest hit).

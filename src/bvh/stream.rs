@@ -10,7 +10,7 @@ use glam::Vec3;
 
 use super::Bvh;
 use super::node::{EMPTY, is_leaf, leaf_blocks};
-use super::traverse::{BoxTest, Stack, WIDEN, dispatch, safe_rcp, with_stack};
+use super::traverse::{BoxTest, SlabTerms, Stack, dispatch, with_stack};
 use crate::geometry::badouel::Badouel;
 use crate::geometry::moeller::Moller;
 use crate::geometry::triangle::TriangleTest;
@@ -43,7 +43,8 @@ impl Bvh {
         })
     }
 
-    /// Occlusion of the rays `base + ids[i]` of `rays` (at most [`STREAM_RAYS`]), which should share
+    /// Occlusion of the rays `base + ids[i]` of `rays` (the first [`STREAM_RAYS`] of `ids`; any
+    /// beyond are not traced and their bits stay clear), which should share
     /// the direction octant `octant` (bit `a` set: the sign bit of component `a` is set, as in
     /// [`octant_of`]); a ray outside it is walked alone. Returns bit `i` set where ray `i` is
     /// occluded. Invalid rays are not occluded.
@@ -56,7 +57,6 @@ impl Bvh {
         octant: u32,
         stack: &mut Stack,
     ) -> u32 {
-        debug_assert!(ids.len() <= STREAM_RAYS);
         if self.root == EMPTY {
             return 0;
         }
@@ -92,19 +92,16 @@ impl Bvh {
                 continue;
             }
             active |= 1 << i;
-            let rdir = Vec3::new(safe_rcp(ray.dir.x), safe_rcp(ray.dir.y), safe_rcp(ray.dir.z));
-            let ordir = ray.origin * rdir;
-            let pad = WIDEN * ordir.abs().max_element();
-            let widen = 1.0 + WIDEN;
-            let (rdf, odf) = if CONS { (rdir * widen, ordir * widen - Vec3::splat(pad)) } else { (rdir, ordir) };
+            let t = SlabTerms::of(&ray);
+            let (rdf, odf) = if CONS { (t.rdf, t.odf) } else { (t.rd, t.od) };
             for a in 0..3 {
-                sr.rd[a][i] = rdir[a];
-                sr.od[a][i] = ordir[a];
+                sr.rd[a][i] = t.rd[a];
+                sr.od[a][i] = t.od[a];
                 sr.rdf[a][i] = rdf[a];
                 sr.odf[a][i] = odf[a];
             }
             sr.tnear[i] = ray.tnear;
-            sr.tfar_box[i] = if CONS { ray.tfar.mul_add(widen, pad) } else { ray.tfar };
+            sr.tfar_box[i] = t.far_limit::<CONS>(ray.tfar);
             tfar[i] = ray.tfar;
             r4[i] = Ray4::new(ray.origin, ray.dir);
         }

@@ -57,7 +57,7 @@ impl BoxTest {
 const MIN_RCP_INPUT: f32 = 1e-18;
 
 /// Relative widening of the far plane distance: 16 ulps, well above the 2–3 roundings involved.
-pub(super) const WIDEN: f32 = 1.0 / (1u32 << 20) as f32;
+const WIDEN: f32 = 1.0 / (1u32 << 20) as f32;
 
 /// Stack entries: at most `WIDTH − 1` pushes per wide level; SAH levels are capped at
 /// `MEDIAN_DEPTH` and median levels below halve the set (at most 32 binary, so 32 wide levels).
@@ -67,7 +67,7 @@ pub(super) const WIDEN: f32 = 1.0 / (1u32 << 20) as f32;
 const STACK: usize = (2 * ((MEDIAN_DEPTH + 33) * (WIDTH - 1) + 1)).next_power_of_two();
 
 #[inline(always)]
-pub(super) fn safe_rcp(d: f32) -> f32 {
+fn safe_rcp(d: f32) -> f32 {
     let d = if d.abs() < MIN_RCP_INPUT { MIN_RCP_INPUT.copysign(d) } else { d };
     1.0 / d
 }
@@ -769,15 +769,43 @@ pub(crate) struct BoxRay {
     int_ok: bool,
 }
 
+/// One ray's slab-test terms as scalars: what [`BoxRay`] splats over a node's children, and what
+/// the occlusion streams (`stream.rs`) keep per ray.
+pub(super) struct SlabTerms {
+    /// Clamped reciprocal direction.
+    pub rd: Vec3,
+    /// `origin · rd`.
+    pub od: Vec3,
+    /// The conservative test's far-plane terms: `rd·(1 + w)` and `od·(1 + w) − pad`.
+    pub rdf: Vec3,
+    pub odf: Vec3,
+    widen: f32,
+    pad: f32,
+}
+
+impl SlabTerms {
+    #[inline(always)]
+    pub(super) fn of(ray: &Ray) -> Self {
+        let rd = Vec3::new(safe_rcp(ray.dir.x), safe_rcp(ray.dir.y), safe_rcp(ray.dir.z));
+        let od = ray.origin * rd;
+        let pad = WIDEN * od.abs().max_element();
+        let widen = 1.0 + WIDEN;
+        Self { rd, od, rdf: rd * widen, odf: od * widen - Vec3::splat(pad), widen, pad }
+    }
+
+    /// The far distance a slab test compares with for a closest hit so far at `tfar`: widened by
+    /// the rounding bound for the conservative test.
+    #[inline(always)]
+    pub(super) fn far_limit<const CONS: bool>(&self, tfar: f32) -> f32 {
+        if CONS { tfar.mul_add(self.widen, self.pad) } else { tfar }
+    }
+}
+
 impl BoxRay {
     #[inline(always)]
     pub fn new(ray: &Ray) -> Self {
-        let rdir = Vec3::new(safe_rcp(ray.dir.x), safe_rcp(ray.dir.y), safe_rcp(ray.dir.z));
-        let ordir = ray.origin * rdir;
+        let SlabTerms { rd: rdir, od: ordir, rdf, odf, widen, pad } = SlabTerms::of(ray);
         let near = [(rdir.x < 0.0) as usize, 2 + (rdir.y < 0.0) as usize, 4 + (rdir.z < 0.0) as usize];
-        let pad = WIDEN * ordir.abs().max_element();
-        let widen = 1.0 + WIDEN;
-        let (rdf, odf) = (rdir * widen, ordir * widen - Vec3::splat(pad));
         // `-0.0 + 0.0` is `+0.0`, whose bits order correctly against positive distances.
         let int_ok = ray.tnear >= 0.0;
         let tnear = if int_ok { ray.tnear + 0.0 } else { ray.tnear };
