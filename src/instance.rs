@@ -292,7 +292,8 @@ impl InstancedScene {
         let mut tfar = ray.tfar;
         let mut best = None;
         let base = stack.push_root(root);
-        walk1::<ANY, CONS>(&self.nodes, &br, stack, base, &mut tfar, |leaf, tfar, stack| {
+        // No prefetching above the objects: an instance tree stays in the cache.
+        walk1::<ANY, CONS>(&self.nodes, false, &br, stack, base, &mut tfar, |leaf, tfar, stack| {
             let (start, count) = leaf_blocks(leaf);
             for k in start..start + count {
                 let p = &self.placed[k];
@@ -338,7 +339,8 @@ impl InstancedScene {
         let base = stack.push_root(self.root);
         // One object's hits, before they are turned to world space.
         let mut r = HitPacket::default();
-        walk_packet::<ANY, CONS>(&self.nodes, &pb, stack, base, &mut tfar, |leaf, lanes, tfar, stack| {
+        // No prefetching above the objects: an instance tree stays in the cache.
+        walk_packet::<ANY, CONS>(&self.nodes, false, &pb, stack, base, &mut tfar, |leaf, lanes, tfar, stack| {
             if lanes != 0 {
                 // A few lanes walk this part of the instance tree one at a time.
                 out.mask |= each_lane_alone::<ANY, _>(

@@ -298,6 +298,7 @@ impl RayStream {
     }
 
     /// Ray `i`. Panics if `i >= len()`, like slice indexing.
+    #[inline]
     pub fn get(&self, i: usize) -> Ray {
         Ray {
             origin: Vec3::new(self.ox[i], self.oy[i], self.oz[i]),

@@ -120,13 +120,14 @@ impl Query for Scene {
         self.bvh.trace_packet::<true>(rays, &mut HitPacket::default())
     }
 
-    /// Trees of more than 32 MiB (`STREAM_MIN_BYTES`). Below that, nodes come from the cache, and
-    /// packets of 16 (with their frustum) and single rays beat the per-ray node tests: shadow
-    /// rays, 2 threads, Sponza 73 against 40 Mrays/s, igea 29 against 25. Above it the groups
-    /// fetch each node once for all their rays and prefetch the children they push: on the
-    /// 11M-triangle sphereflake 12.4 against 8.3 Mrays/s (PERFORMANCE.md).
-    fn occlusion_streams(&self) -> bool {
-        self.bvh.stats.bytes > STREAM_MIN_BYTES
+    /// Trees of more than 32 MiB. Below that, nodes come from the cache, and packets of 16 (with
+    /// their frustum) and single rays beat the occlusion groups' per-ray node tests: shadow rays,
+    /// 2 threads, Sponza 73 against 40 Mrays/s, igea 29 against 25. Above it the groups fetch
+    /// each node once for all their rays and prefetch the children they push: on the
+    /// 11M-triangle sphereflake 12.4 against 8.3 Mrays/s (PERFORMANCE.md). The walks of such
+    /// trees also prefetch the children they enter.
+    fn out_of_cache(&self) -> bool {
+        self.bvh.out_of_cache()
     }
 
     fn occluded_octant_rays(&self, rays: &RayStream, base: usize, ids: &[u16], octant: u32) -> u32 {
@@ -180,11 +181,11 @@ pub trait Query: Sync {
     /// Mrays/s, 1 thread.)
     const INCOHERENT_PACKETS: bool = false;
 
-    /// Whether incoherent occlusion streams go as groups of up to 32 rays of one direction octant
-    /// through [`occluded_octant_rays`](Self::occluded_octant_rays) instead of packets and single
-    /// rays. True for flat scenes whose tree outgrows the last-level cache (see
-    /// [`Scene`]'s implementation).
-    fn occlusion_streams(&self) -> bool {
+    /// Whether the scene's tree outgrows the last-level cache, which changes how incoherent
+    /// occlusion streams are traced: in groups of up to 32 rays of one direction octant through
+    /// [`occluded_octant_rays`](Self::occluded_octant_rays) instead of packets and single rays.
+    /// True for flat scenes above 32 MiB of nodes and blocks (see [`Scene`]'s implementation).
+    fn out_of_cache(&self) -> bool {
         false
     }
 
@@ -325,11 +326,6 @@ fn intersect_range<Q: Query + ?Sized>(
     }
 }
 
-/// Tree size (nodes and blocks) above which flat scenes trace incoherent occlusion streams in
-/// octant groups: 32 MiB, the last-level cache of the machine the crossover was measured on
-/// (between the sphereflake's 295k triangles, 18 MB, and 1M, 62 MB).
-pub(crate) const STREAM_MIN_BYTES: usize = 32 << 20;
-
 /// Rays per octant-sorting group of an incoherent stream.
 const OCTANT_GROUP: usize = 4096;
 
@@ -374,7 +370,7 @@ fn occluded_range<Q: Query + ?Sized>(q: &Q, rays: &RayStream, start: usize, out:
         }
         return;
     }
-    if q.occlusion_streams() {
+    if q.out_of_cache() {
         occluded_in_octant_groups(q, rays, start, out);
         return;
     }
@@ -548,5 +544,43 @@ mod tests {
             hits += expect as usize;
         }
         assert!(hits > rays.len() / 10 && hits < rays.len() * 9 / 10, "{hits} of {} occluded", rays.len());
+    }
+
+    /// A scene taken for out of the cache (its size faked) answers every query as it did before:
+    /// the walks that prefetch, the occlusion groups and the ray-by-ray closest-hit streams.
+    #[test]
+    fn out_of_cache_paths_answer_as_before() {
+        let small = Scene::build(vec![crate::procedural::sphereflake(2, 6, 12)], &BuildConfig::default()).unwrap();
+        let mut big = small.clone();
+        big.bvh.stats.bytes = usize::MAX;
+        assert!(big.out_of_cache() && !small.out_of_cache());
+        let mut rng = Pcg32::new(9, 2);
+        let mut v = |s: f32| Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 2.0 * s - Vec3::splat(s);
+        let rays: RayStream = (0..3000)
+            .map(|_| {
+                let o = v(2.5);
+                Ray::new(o, v(1.0) - o)
+            })
+            .collect();
+        let cam = crate::Camera::look_at(Vec3::new(0.0, 1.2, 4.5), Vec3::new(0.0, 0.3, 0.0), Vec3::Y, 60.0);
+        let (primary, _) = crate::raygen::primary(&cam, 64, 48);
+        for (rays, what) in [(&rays, "random"), (&primary, "primary")] {
+            for c in [Coherence::Coherent, Coherence::Incoherent] {
+                let (mut a, mut b) = (HitStream::default(), HitStream::default());
+                small.intersect_stream(rays, &mut a, c);
+                big.intersect_stream(rays, &mut b, c);
+                let (mut oa, mut ob) = (Vec::new(), Vec::new());
+                small.occluded_stream(rays, &mut oa, c);
+                big.occluded_stream(rays, &mut ob, c);
+                for i in 0..rays.len() {
+                    let single = small.intersect(&rays.get(i));
+                    assert_eq!(big.intersect(&rays.get(i)), single, "{what} {c:?} single ray {i}");
+                    assert_eq!(b.get(i), a.get(i), "{what} {c:?} stream ray {i}");
+                    assert_eq!(a.get(i).map(|h| h.t), single.map(|h| h.t), "{what} {c:?} ray {i}");
+                    assert_eq!(ob[i], oa[i], "{what} {c:?} occlusion ray {i}");
+                    assert_eq!(oa[i], single.is_some(), "{what} {c:?} occlusion ray {i}");
+                }
+            }
+        }
     }
 }

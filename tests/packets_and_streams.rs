@@ -220,9 +220,8 @@ fn reused_hit_streams_hold_only_the_new_answers() {
 fn octant_groups_past_32_rays_trace_only_the_first_32() {
     let scene = scene_of(vec![strahl::procedural::sphereflake(1, 8, 16)]);
     // Rays along -z from in front of the flake: all in one octant (bit 2), most occluded.
-    let rays: RayStream = (0..40)
-        .map(|i| Ray::new(Vec3::new(-0.5 + 0.025 * i as f32, 0.3, 3.0), Vec3::new(0.0, 0.0, -1.0)))
-        .collect();
+    let rays: RayStream =
+        (0..40).map(|i| Ray::new(Vec3::new(-0.5 + 0.025 * i as f32, 0.3, 3.0), Vec3::new(0.0, 0.0, -1.0))).collect();
     let ids: Vec<u16> = (0..40).collect();
     let bits = scene.occluded_octant_rays(&rays, 0, &ids, 4);
     let expect = (0..32).fold(0u32, |m, i| m | (scene.occluded(&rays.get(i)) as u32) << i);

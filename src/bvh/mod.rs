@@ -47,6 +47,13 @@ pub struct BuildStats {
     pub depth: usize,
 }
 
+/// Tree size (nodes and blocks) above which a tree counts as out of the cache: 32 MiB, the
+/// last-level cache of the machine the crossovers were measured on (between the sphereflake's 295k
+/// triangles, 18 MB, and 1M, 62 MB; PERFORMANCE.md). Such trees prefetch the children their walks
+/// enter, and their incoherent streams are traced differently (see
+/// [`Query::out_of_cache`](crate::Query::out_of_cache)).
+pub(crate) const FAR_MEMORY_BYTES: usize = 32 << 20;
+
 /// A built BVH over triangle meshes.
 #[derive(Clone, Debug)]
 pub(crate) struct Bvh {
@@ -60,6 +67,12 @@ pub(crate) struct Bvh {
 }
 
 impl Bvh {
+    /// Whether the tree is larger than [`FAR_MEMORY_BYTES`].
+    #[inline]
+    pub(crate) fn out_of_cache(&self) -> bool {
+        self.stats.bytes > FAR_MEMORY_BYTES
+    }
+
     /// Builds over every hittable triangle of `meshes` on the current rayon pool.
     pub fn build(meshes: &[TriangleMesh], cfg: &BuildConfig) -> Result<Bvh> {
         let start = Instant::now();
