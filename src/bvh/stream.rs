@@ -181,9 +181,7 @@ impl Bvh {
         stack.len = base_sp;
         occluded | alone
     }
-}
 
-impl Bvh {
     /// Prefetches the node or the first block of a leaf that `r` references.
     #[inline(always)]
     fn prefetch_child(&self, r: u32) {
