@@ -1,5 +1,6 @@
 //! Criterion benchmarks of the kernels: BVH build, and primary, shadow and diffuse rays through the
-//! single, packet and stream APIs on one thread. `Throughput::Elements` makes criterion print rays/s.
+//! single, packet and stream APIs on one thread; shadow rays also through the octant groups that
+//! occlusion streams of trees out of the cache take (`groups`). `Throughput::Elements` makes criterion print rays/s.
 //!
 //! Scenes: a generated sphereflake (always), the instanced forest of `data/forest.toml` (always),
 //! and the shared bunny and Sponza when `../shared/scenes` is present. Ray sets are built once per
@@ -75,6 +76,25 @@ fn trace_all<Q: Query>(scene: &Q, rays: &RayStream, occlusion: bool, api: &str, 
             .step_by(PACKET_WIDTH)
             .map(|k| scene.occluded_packet(&rays.packet(k, PACKET_WIDTH)).count_ones() as usize)
             .sum(),
+        ("groups", true) => {
+            // The occlusion kernel of trees out of the cache, on any tree: groups of up to 32
+            // rays of one direction octant, in stream order within each octant.
+            let oct = |i: usize| {
+                let r = rays.get(i);
+                [r.dir.x, r.dir.y, r.dir.z]
+                    .iter()
+                    .enumerate()
+                    .fold(0, |o, (a, x)| o | (x.is_sign_negative() as u32) << a)
+            };
+            let mut n = 0;
+            for o in 0..8 {
+                let ids: Vec<u16> = (0..rays.len()).filter(|&i| oct(i) == o).map(|i| i as u16).collect();
+                for g in ids.chunks(32) {
+                    n += scene.occluded_octant_rays(rays, 0, g, o).count_ones() as usize;
+                }
+            }
+            n
+        }
         (_, false) => {
             let mut h = HitStream::default();
             scene.intersect_stream(rays, &mut h, coherence);
@@ -123,7 +143,9 @@ fn bench_scene<Q: Query>(
         ("diffuse", &diffuse, false, Coherence::Incoherent),
     ] {
         g.throughput(Throughput::Elements(rays.len() as u64));
-        for api in ["single", "packet", "stream"] {
+        let apis: &[&str] =
+            if occlusion { &["single", "packet", "stream", "groups"] } else { &["single", "packet", "stream"] };
+        for &api in apis {
             g.bench_with_input(BenchmarkId::new(class, api), rays, |b, rays| {
                 b.iter(|| trace_all(scene, rays, occlusion, api, coherence))
             });
