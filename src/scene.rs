@@ -181,7 +181,7 @@ pub trait Query: Sync {
     /// Mrays/s, 1 thread.)
     const INCOHERENT_PACKETS: bool = false;
 
-    /// Whether the scene's tree outgrows the last-level cache, which changes how incoherent
+    /// Whether the scene's tree outgrows the cache (a measured 32 MiB), which changes how incoherent
     /// occlusion streams are traced: in groups of up to 32 rays of one direction octant through
     /// [`occluded_octant_rays`](Self::occluded_octant_rays) instead of packets and single rays.
     /// True for flat scenes above 32 MiB of nodes and blocks (see [`Scene`]'s implementation).
