@@ -49,8 +49,8 @@ pub struct BuildStats {
 
 /// Tree size (nodes and blocks) above which a tree counts as out of the cache: 32 MiB. This is a
 /// measured crossover, between the sphereflake's 295k triangles (18 MB) and 1M (62 MB), on a
-/// 2-core VM with 4 MiB of L2 per core whose reported 480 MiB L3 is the host's, shared
-/// (PERFORMANCE.md); it is also the L3 size of the Zen 5 part the project targets. Such trees prefetch the children their walks
+/// 2-core VM with 4 MiB of L2 per core and an L3 it reports as 480 MiB (PERFORMANCE.md); it is
+/// also the L3 size of the Zen 5 part the project targets. Such trees prefetch the children their walks
 /// enter, and their incoherent streams are traced differently (see
 /// [`Query::out_of_cache`](crate::Query::out_of_cache)).
 pub(crate) const FAR_MEMORY_BYTES: usize = 32 << 20;
