@@ -5,7 +5,7 @@
 //! into [`BuildConfig::bins`] bins on all three axes and sweep for the split of least SAH cost
 //! (Wald, "On fast Construction of SAH-based Bounding Volume Hierarchies", RT 2007), counting
 //! primitives in whole leaf blocks; then fill a wide node by repeatedly splitting the child with the
-//! largest surface area until it has [`WIDTH`] children; then recurse, in parallel with rayon
+//! largest surface area until it has `WIDTH` (8) children; then recurse, in parallel with rayon
 //! above [`BuildConfig::parallel_threshold`] primitives.
 
 use glam::{Vec3A, Vec4};
@@ -23,7 +23,7 @@ pub struct BuildConfig {
     pub bins: usize,
     /// Sets of at most this many primitives are never split.
     pub min_leaf: usize,
-    /// Sets of more primitives are always split (at most [`MAX_LEAF_BLOCKS`] blocks of 4).
+    /// Sets of more primitives are always split (at most `MAX_LEAF_BLOCKS` (15) blocks of 4).
     pub max_leaf: usize,
     /// Cost of visiting a node, relative to one block test.
     pub traversal_cost: f32,

@@ -1,6 +1,6 @@
 //! The bounding volume hierarchy: built from boxes and centroids ([`build`]), flattened into wide
-//! nodes ([`node`]) whose leaves reference SoA triangle blocks, traversed by single rays, packets and
-//! streams ([`traverse`]).
+//! nodes (`node`) whose leaves reference SoA triangle blocks, traversed by single rays, packets and
+//! streams (`traverse`, `stream`).
 
 pub mod build;
 pub(crate) mod group;

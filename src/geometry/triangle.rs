@@ -1,9 +1,9 @@
-//! Triangle leaf storage: blocks of [`BLOCK`] triangles in SoA form, laid out for the triangle test
-//! chosen at build time ([`TriangleTest`]), and the [`Kernel`] interface the traversal calls.
+//! Triangle leaf storage: blocks of `BLOCK` (4) triangles in SoA form, laid out for the triangle test
+//! chosen at build time ([`TriangleTest`]), and the `Kernel` interface the traversal calls.
 //!
-//! Each test lives in its own file: [`moeller`](super::moeller) (Embree's default),
-//! [`badouel`](super::badouel) (the seeds' plane-and-projection test) and
-//! [`watertight`](super::watertight) (Woop–Benthin–Wald 2013).
+//! Each test lives in its own file: `moeller` (Embree's default),
+//! `badouel` (the seeds' plane-and-projection test) and
+//! `watertight` (Woop–Benthin–Wald 2013).
 
 use glam::{DVec3, Vec3};
 
