@@ -787,8 +787,9 @@ pub(super) struct SlabTerms {
     /// The conservative test's far-plane terms: `rd·(1 + w)` and `od·(1 + w) − pad`.
     pub rdf: Vec3,
     pub odf: Vec3,
-    widen: f32,
-    pad: f32,
+    /// The conservative test's relative widening `1 + w` and absolute pad.
+    pub widen: f32,
+    pub pad: f32,
 }
 
 impl SlabTerms {
