@@ -192,7 +192,8 @@ pub trait Query: Sync {
     /// Occlusion of the rays `base + ids[i]` of `rays`: bit `i` set where ray `i` is occluded. At
     /// most 32 rays: those beyond are not traced and read as not occluded. The rays should share
     /// the direction octant `octant` (bit `a` set where the sign bit of direction component `a`
-    /// is, `-0.0` included); a ray outside it is answered alone. Flat scenes walk the rays
+    /// is, `-0.0` included); a ray outside it is answered alone. Every `base + id` must lie in
+    /// the stream (else this panics, like slice indexing). Flat scenes walk the rays
     /// together (Embree's occlusion stream); the default asks one ray at a time.
     fn occluded_octant_rays(&self, rays: &RayStream, base: usize, ids: &[u16], octant: u32) -> u32 {
         let _ = octant;
@@ -329,13 +330,14 @@ fn intersect_range<Q: Query + ?Sized>(
 /// Rays per octant-sorting group of an incoherent stream.
 const OCTANT_GROUP: usize = 4096;
 
-/// The direction octant of rays `base..base + oct.len()`: one bit per negative component.
+/// The direction octant of rays `base..base + oct.len()`: one bit per component whose sign bit is
+/// set (`-0.0` included, as the slab tests see it; see [`octant_of_dir`]).
 #[inline(always)]
 fn octants(rays: &RayStream, base: usize, oct: &mut [u8]) {
     let n = oct.len();
     let (dx, dy, dz) = (&rays.dx[base..base + n], &rays.dy[base..base + n], &rays.dz[base..base + n]);
     for (i, o) in oct.iter_mut().enumerate() {
-        *o = (dx[i] < 0.0) as u8 | (((dy[i] < 0.0) as u8) << 1) | (((dz[i] < 0.0) as u8) << 2);
+        *o = octant_of_dir(dx[i], dy[i], dz[i]) as u8;
     }
 }
 
@@ -412,11 +414,7 @@ fn occluded_in_octant_groups<Q: Query + ?Sized>(q: &Q, rays: &RayStream, start: 
     let mut order = [0u16; OCTANT_GROUP];
     for g in (0..n).step_by(OCTANT_GROUP) {
         let m = (n - g).min(OCTANT_GROUP);
-        let b = start + g;
-        let (dx, dy, dz) = (&rays.dx[b..b + m], &rays.dy[b..b + m], &rays.dz[b..b + m]);
-        for (i, o) in oct[..m].iter_mut().enumerate() {
-            *o = octant_of_dir(dx[i], dy[i], dz[i]) as u8;
-        }
+        octants(rays, start + g, &mut oct[..m]);
         sort_by_octant(0..m as u16, &oct, &mut order[..m]);
         let mut k = 0;
         while k < m {
