@@ -153,8 +153,8 @@ impl InstancedScene {
             if !is_invertible(&m) {
                 return Err(Error::BadTransform { instance: i });
             }
-            if let Some((lo, hi)) = obj.bounds() {
-                prims.push(PrimRef::new(world_box(&m, lo, hi), i as u32));
+            if let Some(b) = placed_box(obj.bvh(), &m) {
+                prims.push(PrimRef::new(b, i as u32));
             }
         }
         let cfg = BuildConfig {
@@ -459,6 +459,34 @@ fn object_packet(to_object: &Affine3A, pb: &PacketBoxes, tfar: Pf, p: &RayPacket
     }
 }
 
+/// Levels of an object's tree whose boxes bound its instances: the world box of an instance is the
+/// union of the moved boxes of the object's nodes this many levels down (at most 8² boxes), not
+/// the moved root box. A turned object's root box moves into a box up to √2 wider on each turned
+/// axis, empty at its corners; its children's boxes follow the geometry more closely.
+const PLACED_BOX_LEVELS: usize = 2;
+
+/// The world box of an instance of `bvh` under `m` (see [`PLACED_BOX_LEVELS`]), or `None` for an
+/// object with nothing to hit.
+fn placed_box(bvh: &crate::bvh::Bvh, m: &Affine3A) -> Option<Aabb> {
+    fn grow(bvh: &crate::bvh::Bvh, m: &Affine3A, r: u32, lo: Vec3, hi: Vec3, levels: usize, out: &mut Aabb) {
+        if levels == 0 || r == EMPTY || crate::bvh::node::is_leaf(r) {
+            out.grow(&world_box(m, lo, hi));
+            return;
+        }
+        let n = &bvh.nodes[r as usize];
+        for i in 0..n.child.len() {
+            if n.child[i] != EMPTY {
+                let c = |a: usize| Vec3::new(n.bounds[a][i], n.bounds[a + 2][i], n.bounds[a + 4][i]);
+                grow(bvh, m, n.child[i], c(0), c(1), levels - 1, out);
+            }
+        }
+    }
+    let (lo, hi) = bvh.bounds?;
+    let mut out = Aabb::EMPTY;
+    grow(bvh, m, bvh.root, lo, hi, PLACED_BOX_LEVELS, &mut out);
+    Some(out)
+}
+
 /// The world box of an object box `lo..hi` under `m`: the bounds of its eight moved corners.
 fn world_box(m: &Affine3A, lo: Vec3, hi: Vec3) -> Aabb {
     let mut b = Aabb::EMPTY;
@@ -512,5 +540,43 @@ impl Query for InstancedScene {
 
     fn occluded_packet(&self, rays: &RayPacket) -> u32 {
         self.trace_packet::<true>(rays, &mut HitPacket::default())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::Quat;
+
+    use super::*;
+    use crate::procedural::sphereflake;
+
+    #[test]
+    fn turned_instances_get_boxes_that_bound_their_triangles_closer_than_the_moved_root_box() {
+        let mesh = sphereflake(1, 8, 16);
+        let object = Scene::build(vec![mesh.clone()], &BuildConfig::default()).unwrap();
+        let (lo, hi) = object.bounds().unwrap();
+        for (turn, scale) in [(0.7, Vec3::new(1.5, 0.7, 1.5)), (2.3, Vec3::ONE), (0.0, Vec3::splat(2.0))] {
+            let m = Affine3A::from_scale_rotation_translation(
+                scale,
+                Quat::from_rotation_y(turn) * Quat::from_rotation_x(turn * 0.5),
+                Vec3::new(3.0, -2.0, 1e3),
+            );
+            let b = placed_box(object.bvh(), &m).unwrap();
+            let root = world_box(&m, lo, hi);
+            // Every placed vertex inside (up to the rounding of moving a point), and the box
+            // inside the moved root box.
+            let slack = Vec3A::splat(1e-5) * (root.hi - root.lo).max_element();
+            for p in mesh.positions() {
+                let q = Vec3A::from(m.transform_point3(*p));
+                assert!(q.cmpge(b.lo - slack).all() && q.cmple(b.hi + slack).all(), "{q} outside {b:?}");
+            }
+            assert!(b.lo.cmpge(root.lo).all() && b.hi.cmple(root.hi).all());
+            if turn == 0.0 {
+                // An unturned object's children fill its root box on every axis.
+                assert_eq!(b, root);
+            } else {
+                assert!(b.half_area() < 0.9 * root.half_area(), "{} against {}", b.half_area(), root.half_area());
+            }
+        }
     }
 }
