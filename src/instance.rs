@@ -144,19 +144,22 @@ impl InstancedScene {
         if instances.len() > MAX_BLOCK_INDEX {
             return Err(Error::TooManyInstances(instances.len()));
         }
-        let mut prims = Vec::with_capacity(instances.len());
         for (i, inst) in instances.iter().enumerate() {
-            let Some(obj) = objects.get(inst.object) else {
+            if inst.object >= objects.len() {
                 return Err(Error::UnknownObject { instance: i, object: inst.object, objects: objects.len() });
-            };
-            let m = inst.transform;
-            if !is_invertible(&m) {
+            }
+            if !is_invertible(&inst.transform) {
                 return Err(Error::BadTransform { instance: i });
             }
-            if let Some(b) = placed_box(obj.bvh(), &m) {
-                prims.push(PrimRef::new(b, i as u32));
-            }
         }
+        // In parallel: up to 64 boxes of eight corners each per instance.
+        let mut prims: Vec<PrimRef> = instances
+            .par_iter()
+            .enumerate()
+            .filter_map(|(i, inst)| {
+                placed_box(objects[inst.object].bvh(), &inst.transform).map(|b| PrimRef::new(b, i as u32))
+            })
+            .collect();
         let cfg = BuildConfig {
             min_leaf: INSTANCES_PER_LEAF,
             max_leaf: INSTANCES_PER_LEAF,
