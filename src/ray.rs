@@ -41,13 +41,12 @@ impl Ray {
     /// (and "not occluded") instead of an error, so that one bad ray cannot spoil a batch. A
     /// direction with no component of magnitude 1e-18 or more counts as zero: traversal clamps
     /// reciprocals there (as Embree does), and hit distances beyond 1e18 would overflow.
+    #[inline]
     pub fn is_valid(&self) -> bool {
-        self.origin.is_finite()
-            && self.dir.is_finite()
-            && self.dir.abs().max_element() >= MIN_DIRECTION
-            && !self.tnear.is_nan()
-            && !self.tfar.is_nan()
-            && self.tnear <= self.tfar
+        // Without branches (every single-ray query pays for this check): `0·x` is NaN exactly
+        // where `x` is infinite or NaN, and a NaN sum is not 0; a NaN bound fails `tnear <= tfar`.
+        let finite = (self.origin * 0.0 + self.dir * 0.0).element_sum() == 0.0;
+        finite & (self.dir.abs().max_element() >= MIN_DIRECTION) & (self.tnear <= self.tfar)
     }
 }
 
@@ -509,6 +508,19 @@ mod tests {
         assert!(!Ray::segment(o, Vec3::X, 2.0, 1.0).is_valid());
         assert!(!Ray::segment(o, Vec3::X, f32::NAN, 1.0).is_valid());
         assert!(Ray::segment(o, Vec3::X, 1.0, 1.0).is_valid());
+        // One bad component anywhere, beside large finite ones.
+        let big = f32::MAX;
+        assert!(Ray::new(Vec3::new(big, -big, big), Vec3::new(big, 1.0, -big)).is_valid());
+        for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+            for k in 0..3 {
+                let mut v = Vec3::new(big, -1.0, 3.0);
+                v[k] = bad;
+                assert!(!Ray::new(v, Vec3::X).is_valid(), "origin {v}");
+                assert!(!Ray::new(o, v).is_valid(), "direction {v}");
+            }
+        }
+        assert!(!Ray::segment(o, Vec3::X, 0.0, f32::NAN).is_valid());
+        assert!(Ray::segment(o, Vec3::X, f32::NEG_INFINITY, f32::INFINITY).is_valid());
     }
 
     #[test]
