@@ -80,6 +80,13 @@ macro_rules! bit_order {
 bit_order!(f32x8, i32x8, 8);
 bit_order!(f32x16, i32x16, 16);
 
+/// One lane per child of a BVH node ([`WIDTH`](crate::bvh::node::WIDTH) lanes). With `WIDTH`
+/// these two types choose the node width (16 with `f32x16`/`i32x16` ran 4–15% slower, see
+/// PERFORMANCE.md).
+pub(crate) type Nf = f32x8;
+/// [`Nf`]'s integer twin.
+pub(crate) type Ni = i32x8;
+
 /// Fused multiply-add on lane vectors: `madd(a, b, c) = a·b + c`, `msub(a, b, c) = a·b − c`, one
 /// rounding each where the CPU has FMA (Embree's `madd`/`msub`).
 pub(crate) trait Fma: Copy + core::ops::Mul<Output = Self> {

@@ -45,8 +45,8 @@ const SOLO_SCALE: f32 = 0.5;
 /// The children of `node` that are leaves.
 #[inline(always)]
 fn leaf_children(node: &Node) -> u32 {
-    let c: i32x8 = bytemuck::cast(node.child);
-    (c.is_negative() & !c.simd_eq(i32x8::splat(EMPTY as i32))).to_bitmask()
+    let c: Ni = bytemuck::cast(node.child);
+    (c.is_negative() & !c.simd_eq(Ni::splat(EMPTY as i32))).to_bitmask()
 }
 
 impl Bvh {
@@ -242,18 +242,18 @@ fn per_packet<const CONS: bool>(
     subs: u32,
     b: &[[f32; WIDTH]; 6],
 ) -> (u32, [f32; WIDTH], [i32; WIDTH], u32) {
-    let mut packets = i32x8::splat(0);
-    let mut dist = f32x8::splat(f32::INFINITY);
+    let mut packets = Ni::splat(0);
+    let mut dist = Nf::splat(f32::INFINITY);
     let mut tiny = 0u32;
     let mut m = subs;
     while m != 0 {
         let s = m.trailing_zeros() as usize;
         m &= m - 1;
         let (hit, tn) = sf[s].test_vec::<CONS>(b, tmax[s]);
-        packets |= bytemuck::cast::<f32x8, i32x8>(hit) & i32x8::splat(1 << s);
+        packets |= bytemuck::cast::<Nf, Ni>(hit) & Ni::splat(1 << s);
         dist = hit.select(dist.fast_min(tn), dist);
-        tiny |= sf[s].small(b, &(tn * f32x8::splat(SOLO_SCALE)).to_array()) & hit.to_bitmask();
+        tiny |= sf[s].small(b, &(tn * Nf::splat(SOLO_SCALE)).to_array()) & hit.to_bitmask();
     }
-    let mask = (!packets.simd_eq(i32x8::splat(0))).to_bitmask();
+    let mask = (!packets.simd_eq(Ni::splat(0))).to_bitmask();
     (mask, dist.to_array(), packets.to_array(), tiny)
 }

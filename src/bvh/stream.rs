@@ -9,7 +9,7 @@
 use glam::Vec3;
 
 use super::Bvh;
-use super::node::{EMPTY, is_leaf, leaf_blocks};
+use super::node::{EMPTY, WIDTH, is_leaf, leaf_blocks};
 use super::traverse::{BoxTest, SlabTerms, Stack, dispatch, with_stack};
 use crate::geometry::badouel::Badouel;
 use crate::geometry::moeller::Moller;
@@ -121,9 +121,9 @@ impl Bvh {
             }
             while !is_leaf(cur) {
                 let b = &self.nodes[cur as usize].bounds;
-                let rows = |r: [usize; 3]| [f32x8::new(b[r[0]]), f32x8::new(b[r[1]]), f32x8::new(b[r[2]])];
+                let rows = |r: [usize; 3]| [Nf::new(b[r[0]]), Nf::new(b[r[1]]), Nf::new(b[r[2]])];
                 let (bn, bf) = (rows(near), rows(far));
-                let mut hits = i32x8::splat(0);
+                let mut hits = Ni::splat(0);
                 let mut bits = mask;
                 while bits != 0 {
                     let i = bits.trailing_zeros() as usize;
@@ -133,7 +133,7 @@ impl Bvh {
                     // instead of folding the widening into six more terms as `BoxRay` does: the
                     // same bound, as the widening is increasing, at one fused multiply-add for
                     // six fewer loads.
-                    let s = f32x8::splat;
+                    let s = Nf::splat;
                     let (r0, r1, r2) = (s(sr.rd[0][i]), s(sr.rd[1][i]), s(sr.rd[2][i]));
                     let (o0, o1, o2) = (s(sr.od[0][i]), s(sr.od[1][i]), s(sr.od[2][i]));
                     let n0 = bn[0].mul_sub(r0, o0);
@@ -143,11 +143,11 @@ impl Bvh {
                     let f = if CONS { f.mul_add(s(widen), s(sr.pad[i])) } else { f };
                     let tn = n0.fast_max(n1).fast_max(n2.fast_max(s(sr.tnear[i])));
                     let tf = f.fast_min(s(sr.tfar_box[i]));
-                    let entered: i32x8 = bytemuck::cast(tn.simd_le(tf));
-                    hits |= entered & i32x8::splat(1 << i);
+                    let entered: Ni = bytemuck::cast(tn.simd_le(tf));
+                    hits |= entered & Ni::splat(1 << i);
                 }
                 let lanes = hits.to_array();
-                let mut entered = !hits.simd_eq(i32x8::splat(0)).to_bitmask() & 0xff;
+                let mut entered = !hits.simd_eq(Ni::splat(0)).to_bitmask() & crate::simd::low_bits(WIDTH);
                 if entered == 0 {
                     continue 'pop;
                 }

@@ -347,7 +347,7 @@ pub(super) fn order_children<const ANY: bool>(
     sp: &mut usize,
     child: &[u32; WIDTH],
     mut mask: u32,
-    d: f32x8,
+    d: Nf,
 ) -> u32 {
     let i0 = mask.trailing_zeros() as usize;
     let rest = mask & mask.wrapping_sub(1);
@@ -395,12 +395,12 @@ pub(crate) struct Frustum {
     near: [usize; 3],
     far: [usize; 3],
     /// The shared origin, per axis.
-    o: [f32x8; 3],
-    rmin: [f32x8; 3],
-    rmax: [f32x8; 3],
-    tnear: f32x8,
+    o: [Nf; 3],
+    rmin: [Nf; 3],
+    rmax: [Nf; 3],
+    tnear: Nf,
     /// How far apart the rays get per unit of `t`: the largest spread of any direction component.
-    spread: f32x8,
+    spread: Nf,
     /// Whether the packet's `tnear` is non-negative: integer minima and maxima (see [`BitOrder`]).
     int_ok: bool,
 }
@@ -436,18 +436,18 @@ impl Frustum {
         let mut f = Frustum {
             near: [0; 3],
             far: [0; 3],
-            o: [f32x8::splat(0.0); 3],
-            rmin: [f32x8::splat(0.0); 3],
-            rmax: [f32x8::splat(0.0); 3],
-            tnear: f32x8::splat(hmin(tnear)),
-            spread: f32x8::splat(0.0),
+            o: [Nf::splat(0.0); 3],
+            rmin: [Nf::splat(0.0); 3],
+            rmax: [Nf::splat(0.0); 3],
+            tnear: Nf::splat(hmin(tnear)),
+            spread: Nf::splat(0.0),
             int_ok: false,
         };
         // `-0.0 + 0.0` is `+0.0`, which orders right as bits.
         let t0 = f.tnear.to_array()[0];
         f.int_ok = t0 >= 0.0;
         if f.int_ok {
-            f.tnear = f32x8::splat(t0 + 0.0);
+            f.tnear = Nf::splat(t0 + 0.0);
         }
         let mut spread = 0.0f32;
         for a in 0..3 {
@@ -460,11 +460,11 @@ impl Frustum {
             // Near plane: the box minimum for positive directions, mirrored for negative ones.
             f.near[a] = 2 * a + negative as usize;
             f.far[a] = 2 * a + 1 - negative as usize;
-            f.o[a] = f32x8::splat(o0);
-            f.rmin[a] = f32x8::splat(rmin);
-            f.rmax[a] = f32x8::splat(rmax);
+            f.o[a] = Nf::splat(o0);
+            f.rmin[a] = Nf::splat(rmin);
+            f.rmax[a] = Nf::splat(rmax);
         }
-        f.spread = f32x8::splat(spread * FOOTPRINT_FACTOR);
+        f.spread = Nf::splat(spread * FOOTPRINT_FACTOR);
         Some(f)
     }
 
@@ -477,11 +477,11 @@ impl Frustum {
 
     /// [`test`](Self::test) with the mask as a select mask and the distances as a vector.
     #[inline(always)]
-    pub(super) fn test_vec<const CONS: bool>(&self, b: &[[f32; WIDTH]; 6], tfar_max: f32) -> (f32x8, f32x8) {
-        let pn = |a: usize| f32x8::new(b[self.near[a]]) - self.o[a];
-        let pf = |a: usize| f32x8::new(b[self.far[a]]) - self.o[a];
+    pub(super) fn test_vec<const CONS: bool>(&self, b: &[[f32; WIDTH]; 6], tfar_max: f32) -> (Nf, Nf) {
+        let pn = |a: usize| Nf::new(b[self.near[a]]) - self.o[a];
+        let pf = |a: usize| Nf::new(b[self.far[a]]) - self.o[a];
         let (pn, pf) = ([pn(0), pn(1), pn(2)], [pf(0), pf(1), pf(2)]);
-        let tfar = f32x8::splat(tfar_max);
+        let tfar = Nf::splat(tfar_max);
         // Exit distances stay float. A product `+0 · r` with `r < 0` is `-0.0`, the smallest value
         // as bits: an integer minimum would return it over the true (negative) exit, and every box
         // with a plane through the packet's origin would be entered (Sibenik's camera sits on such
@@ -497,7 +497,7 @@ impl Frustum {
             n(0).fast_max(n(1)).fast_max(n(2).fast_max(self.tnear))
         };
         // Widen by the rounding of the subtraction and product (relative), as in the per-ray test.
-        let tf = if CONS { tf + (tn.abs() + tf.abs()) * f32x8::splat(WIDEN) } else { tf };
+        let tf = if CONS { tf + (tn.abs() + tf.abs()) * Nf::splat(WIDEN) } else { tf };
         let mask = if self.int_ok { tn.le_mask(tf) } else { tn.simd_le(tf) };
         (mask, tn)
     }
@@ -527,7 +527,7 @@ impl Frustum {
             let (rmin, rmax) = (f.rmin[a].to_array()[0], f.rmax[a].to_array()[0]);
             spread = spread.max((1.0 / rmin - 1.0 / rmax).abs());
         }
-        f.spread = f32x8::splat(spread * FOOTPRINT_FACTOR);
+        f.spread = Nf::splat(spread * FOOTPRINT_FACTOR);
         Some(f)
     }
 
@@ -535,9 +535,9 @@ impl Frustum {
     /// distance `d`.
     #[inline(always)]
     pub(super) fn small(&self, b: &[[f32; WIDTH]; 6], d: &[f32; WIDTH]) -> u32 {
-        let ext = |a: usize| f32x8::new(b[2 * a + 1]) - f32x8::new(b[2 * a]);
+        let ext = |a: usize| Nf::new(b[2 * a + 1]) - Nf::new(b[2 * a]);
         let e = ext(0).fast_max(ext(1)).fast_max(ext(2));
-        e.simd_lt(f32x8::new(*d).abs() * self.spread).to_bitmask()
+        e.simd_lt(Nf::new(*d).abs() * self.spread).to_bitmask()
     }
 }
 
@@ -759,17 +759,17 @@ impl Bvh {
 
 /// One ray's slab-test terms, for the 8 children of a node at a time.
 pub(crate) struct BoxRay {
-    rd: [f32x8; 3],
-    od: [f32x8; 3],
+    rd: [Nf; 3],
+    od: [Nf; 3],
     /// The far planes' terms: for the conservative test, `rd·(1 + w)` and `od·(1 + w) − pad`, so
     /// that `fmsub(box, rdf, odf)` is the widened far distance `(box·rd − od)·(1 + w) + pad`
     /// without a multiply-add after the minimum (the same bound, one step shorter).
-    rdf: [f32x8; 3],
-    odf: [f32x8; 3],
+    rdf: [Nf; 3],
+    odf: [Nf; 3],
     /// Row of the near plane per axis: the box minimum where the direction is positive.
     near: [usize; 3],
     far: [usize; 3],
-    tnear: f32x8,
+    tnear: Nf,
     /// `(widen, pad)` of the conservative test, for the ray's own `tfar`.
     far_scale: (f32, f32),
     /// Whether `tnear ≥ 0`: then the minima and maxima run as integer operations (see
@@ -819,13 +819,13 @@ impl BoxRay {
         let int_ok = ray.tnear >= 0.0;
         let tnear = if int_ok { ray.tnear + 0.0 } else { ray.tnear };
         Self {
-            rd: [f32x8::splat(rdir.x), f32x8::splat(rdir.y), f32x8::splat(rdir.z)],
-            od: [f32x8::splat(ordir.x), f32x8::splat(ordir.y), f32x8::splat(ordir.z)],
-            rdf: [f32x8::splat(rdf.x), f32x8::splat(rdf.y), f32x8::splat(rdf.z)],
-            odf: [f32x8::splat(odf.x), f32x8::splat(odf.y), f32x8::splat(odf.z)],
+            rd: [Nf::splat(rdir.x), Nf::splat(rdir.y), Nf::splat(rdir.z)],
+            od: [Nf::splat(ordir.x), Nf::splat(ordir.y), Nf::splat(ordir.z)],
+            rdf: [Nf::splat(rdf.x), Nf::splat(rdf.y), Nf::splat(rdf.z)],
+            odf: [Nf::splat(odf.x), Nf::splat(odf.y), Nf::splat(odf.z)],
             near,
             far: [near[0] ^ 1, near[1] ^ 1, near[2] ^ 1],
-            tnear: f32x8::splat(tnear),
+            tnear: Nf::splat(tnear),
             far_scale: (widen, pad),
             int_ok,
         }
@@ -833,16 +833,16 @@ impl BoxRay {
 
     /// The children of `node` the ray enters before `tfar`, and the entry distance of each.
     #[inline(always)]
-    fn test<const CONS: bool>(&self, node: &Node, tfar: f32) -> (u32, f32x8) {
+    fn test<const CONS: bool>(&self, node: &Node, tfar: f32) -> (u32, Nf) {
         let b = &node.bounds;
-        let near = |a: usize| f32x8::new(b[self.near[a]]).mul_sub(self.rd[a], self.od[a]);
+        let near = |a: usize| Nf::new(b[self.near[a]]).mul_sub(self.rd[a], self.od[a]);
         let (n0, n1, n2) = (near(0), near(1), near(2));
         let (f0, f1, f2, tf) = if CONS {
-            let far = |a: usize| f32x8::new(b[self.far[a]]).mul_sub(self.rdf[a], self.odf[a]);
-            (far(0), far(1), far(2), f32x8::splat(tfar.mul_add(self.far_scale.0, self.far_scale.1)))
+            let far = |a: usize| Nf::new(b[self.far[a]]).mul_sub(self.rdf[a], self.odf[a]);
+            (far(0), far(1), far(2), Nf::splat(tfar.mul_add(self.far_scale.0, self.far_scale.1)))
         } else {
-            let far = |a: usize| f32x8::new(b[self.far[a]]).mul_sub(self.rd[a], self.od[a]);
-            (far(0), far(1), far(2), f32x8::splat(tfar))
+            let far = |a: usize| Nf::new(b[self.far[a]]).mul_sub(self.rd[a], self.od[a]);
+            (far(0), far(1), far(2), Nf::splat(tfar))
         };
         if self.int_ok {
             // Integer minima and maxima: exact here because `tnear ≥ +0` enters the maximum.
@@ -1139,7 +1139,7 @@ pub(crate) fn walk_packet<const ANY: bool, const CONS: bool>(
                 if far_memory {
                     prefetch_inner(nodes, &node.child, mask);
                 }
-                cur = order_children::<ANY>(stack, &mut sp, &child, mask, f32x8::new(d));
+                cur = order_children::<ANY>(stack, &mut sp, &child, mask, Nf::new(d));
                 lanes = 0;
                 continue;
             }
@@ -1172,7 +1172,7 @@ pub(crate) fn walk_packet<const ANY: bool, const CONS: bool>(
             // in slot order, descending into the last). The order is sorted here, on indices,
             // so that the 64-byte lane distances are written once. (Descending into the first
             // slot instead cost igea's shadow packets a third.)
-            let mut order = [0u8, 1, 2, 3, 4, 5, 6, 7];
+            let mut order: [u8; WIDTH] = std::array::from_fn(|i| i as u8);
             if !ANY {
                 for i in 1..n {
                     let k = order[i];
