@@ -24,7 +24,7 @@ use crate::bvh::node::{EMPTY, MAX_BLOCK_INDEX, Node, leaf_blocks, leaf_ref};
 use crate::bvh::traverse::{
     BoxRay, LeafHit, PacketBoxes, PacketHits, Stack, dispatch, each_lane_alone, walk_packet, walk1, with_stack,
 };
-use crate::bvh::{BoxTest, BuildConfig};
+use crate::bvh::{BoxTest, BuildConfig, INSTANCED_FAR_MEMORY_BYTES};
 use crate::error::{Error, Result};
 use crate::geometry::TriangleTest;
 use crate::geometry::badouel::Badouel;
@@ -132,7 +132,7 @@ impl InstancedScene {
     }
 
     fn from_objects(
-        objects: Vec<Scene>,
+        mut objects: Vec<Scene>,
         instances: Vec<Instance>,
         (test, box_test): (TriangleTest, BoxTest),
         objects_build_ms: f64,
@@ -191,6 +191,10 @@ impl InstancedScene {
             })
             .collect();
         let object_bytes: usize = objects.iter().map(|o| o.stats().bytes).sum();
+        // Objects out of the cache together prefetch in their walks (see the constant).
+        for o in &mut objects {
+            o.set_prefetch(object_bytes > INSTANCED_FAR_MEMORY_BYTES);
+        }
         let bytes = object_bytes
             + nodes.len() * size_of::<Node>()
             + placed.len() * size_of::<Placed>()
@@ -552,6 +556,40 @@ mod tests {
 
     use super::*;
     use crate::procedural::sphereflake;
+
+    #[test]
+    fn objects_out_of_the_cache_together_prefetch_in_their_walks() {
+        let mesh = sphereflake(3, 8, 16);
+        let object = Scene::build(vec![mesh], &BuildConfig::default()).unwrap();
+        let bytes = object.stats().bytes;
+        // One object between the two thresholds; two of them together above the lower one.
+        assert!(bytes < INSTANCED_FAR_MEMORY_BYTES && 2 * bytes > INSTANCED_FAR_MEMORY_BYTES, "{bytes} B");
+        assert!(!object.bvh().prefetch);
+        let place = |objects: [usize; 2]| {
+            objects
+                .iter()
+                .enumerate()
+                .map(|(i, &o)| Instance::new(o, Affine3A::from_translation(Vec3::X * i as f32)))
+                .collect()
+        };
+        let one = InstancedScene::from_scenes(vec![object.clone()], place([0, 0])).unwrap();
+        assert!(!one.objects()[0].bvh().prefetch);
+        let two = InstancedScene::from_scenes(vec![object.clone(), object], place([0, 1])).unwrap();
+        assert!(two.objects().iter().all(|o| o.bvh().prefetch));
+        // Prefetching changes no answer.
+        let mut hits = 0;
+        for k in 0..200 {
+            let a = k as f32 * 0.031;
+            let ray = Ray::new(
+                Vec3::new(0.5, 0.0, 0.0) + 4.0 * Vec3::new(a.cos(), 0.3, a.sin()),
+                Vec3::new(-a.cos(), -0.2, -a.sin()),
+            );
+            assert_eq!(one.intersect(&ray), two.intersect(&ray), "ray {k}");
+            assert_eq!(one.occluded(&ray), two.occluded(&ray), "ray {k}");
+            hits += one.intersect(&ray).is_some() as usize;
+        }
+        assert!(hits > 100, "{hits} hits");
+    }
 
     #[test]
     fn turned_instances_get_boxes_that_bound_their_triangles_closer_than_the_moved_root_box() {

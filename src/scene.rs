@@ -95,6 +95,11 @@ impl Scene {
     pub(crate) fn bvh(&self) -> &Bvh {
         &self.bvh
     }
+
+    /// Whether this scene's walks prefetch the children they enter (see [`Bvh::prefetch`]).
+    pub(crate) fn set_prefetch(&mut self, on: bool) {
+        self.bvh.prefetch = on;
+    }
 }
 
 impl Query for Scene {
@@ -551,6 +556,7 @@ mod tests {
         let small = Scene::build(vec![crate::procedural::sphereflake(2, 6, 12)], &BuildConfig::default()).unwrap();
         let mut big = small.clone();
         big.bvh.stats.bytes = usize::MAX;
+        big.bvh.prefetch = true;
         assert!(big.out_of_cache() && !small.out_of_cache());
         let mut rng = Pcg32::new(9, 2);
         let mut v = |s: f32| Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 2.0 * s - Vec3::splat(s);

@@ -627,7 +627,7 @@ impl Bvh {
         let br = BoxRay::new(ray);
         let mut tfar = ray.tfar;
         let mut best = None;
-        walk1::<ANY, CONS>(&self.nodes, self.out_of_cache(), &br, stack, base, &mut tfar, |leaf, tfar, _| {
+        walk1::<ANY, CONS>(&self.nodes, self.prefetch, &br, stack, base, &mut tfar, |leaf, tfar, _| {
             let (start, count) = leaf_blocks(leaf);
             for bi in start..start + count {
                 if let Some((lane, t, u, v)) = K::intersect1(&self.blocks[bi], &r4, &pre, ray.tnear, *tfar) {
@@ -688,7 +688,7 @@ impl Bvh {
         let rk = RayK { o: pb.o, d: pb.d, tnear: pb.tnear };
         walk_packet::<ANY, CONS>(
             &self.nodes,
-            self.out_of_cache(),
+            self.prefetch,
             &pb,
             stack,
             base,
