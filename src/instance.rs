@@ -271,7 +271,7 @@ impl InstancedScene {
     }
 
     fn trace1<const ANY: bool>(&self, ray: &Ray) -> Option<(u32, LeafHit)> {
-        if !ray.is_valid() || self.root == EMPTY {
+        if !ray.read_fields().is_valid() || self.root == EMPTY {
             return None;
         }
         with_stack(|stack| dispatch!(self.test, self.box_test, |K, C| self.trace1_with::<ANY, K, C>(ray, stack)))
@@ -284,7 +284,8 @@ impl InstancedScene {
         ray: &Ray,
         stack: &mut Stack,
     ) -> Option<(u32, LeafHit)> {
-        self.trace1_from::<ANY, K, CONS>(ray, self.root, stack)
+        // Read field by field, as the object walks do (see `Ray::read_fields`).
+        self.trace1_from::<ANY, K, CONS>(&ray.read_fields(), self.root, stack)
     }
 
     /// [`trace1_with`](Self::trace1_with) over the instance subtree at `root`.

@@ -41,6 +41,20 @@ impl Ray {
     /// (and "not occluded") instead of an error, so that one bad ray cannot spoil a batch. A
     /// direction with no component of magnitude 1e-18 or more counts as zero: traversal clamps
     /// reciprocals there (as Embree does), and hit distances beyond 1e18 would overflow.
+    /// This ray read field by field (see [`load_f32`](crate::simd::load_f32)): the copy a
+    /// walk works on, so that it never reads its caller's freshly written fields in wider loads.
+    #[inline(always)]
+    pub(crate) fn read_fields(&self) -> Ray {
+        use crate::simd::load_f32 as ld;
+        let (o, d) = (&self.origin, &self.dir);
+        Ray {
+            origin: Vec3::new(ld(&o.x), ld(&o.y), ld(&o.z)),
+            dir: Vec3::new(ld(&d.x), ld(&d.y), ld(&d.z)),
+            tnear: ld(&self.tnear),
+            tfar: ld(&self.tfar),
+        }
+    }
+
     #[inline]
     pub fn is_valid(&self) -> bool {
         // Without branches (every single-ray query pays for this check): `0·x` is NaN exactly

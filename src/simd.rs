@@ -33,6 +33,18 @@ pub(crate) fn prefetch<T>(p: &T) {
     let _ = p;
 }
 
+/// `*x`, read with a load of its own four bytes. A caller that has just written a ray field by
+/// field would otherwise see its fields read back eight or sixteen bytes at a time (the compiler
+/// merges neighbouring loads), and a load spanning two recent stores cannot take their values on
+/// the way to the cache: it waits until both have reached it (PERFORMANCE.md measures this per
+/// single-ray call).
+#[inline(always)]
+pub(crate) fn load_f32(x: &f32) -> f32 {
+    // SAFETY: `x` is a valid, aligned reference to an initialized `f32`; a volatile read of it is
+    // an ordinary read that the compiler may not merge with others.
+    unsafe { core::ptr::read_volatile(x) }
+}
+
 /// Minima, maxima and `<=` of floats compared as signed integers: one-cycle `vpmaxsd`/`vpminsd`
 /// instead of four-cycle `vmaxps`/`vminps` on the traversal's critical path (Embree's
 /// `maxi`/`mini`). Non-negative floats order like their bit patterns; negative ones order

@@ -592,7 +592,7 @@ impl Bvh {
     /// Closest hit (`ANY = false`) or first hit found (`ANY = true`) of one ray.
     #[inline(always)]
     pub fn trace1<const ANY: bool>(&self, ray: &Ray) -> Option<LeafHit> {
-        if !ray.is_valid() || self.root == EMPTY {
+        if !ray.read_fields().is_valid() || self.root == EMPTY {
             return None;
         }
         with_stack(|stack| dispatch!(self.test, self.box_test, |K, C| self.trace1_with::<ANY, K, C>(ray, stack)))
@@ -606,7 +606,9 @@ impl Bvh {
         ray: &Ray,
         stack: &mut Stack,
     ) -> Option<LeafHit> {
-        self.trace1_from::<ANY, K, CONS>(ray, self.root, stack)
+        // The walk's own copy, read field by field: this call's callers (the single-ray API, an
+        // instance's object walk) have just written the ray (see `Ray::read_fields`).
+        self.trace1_from::<ANY, K, CONS>(&ray.read_fields(), self.root, stack)
     }
 
     /// [`trace1_with`](Self::trace1_with) over the subtree at `root` (a node or a leaf): the
