@@ -36,11 +36,6 @@ impl Ray {
         self.origin + self.dir * t
     }
 
-    /// Whether the ray can hit anything. Rays with a NaN or infinite origin or direction, a zero
-    /// direction, a NaN bound, or `tnear > tfar` are invalid; every query answers them with a miss
-    /// (and "not occluded") instead of an error, so that one bad ray cannot spoil a batch. A
-    /// direction with no component of magnitude 1e-18 or more counts as zero: traversal clamps
-    /// reciprocals there (as Embree does), and hit distances beyond 1e18 would overflow.
     /// This ray read field by field (see [`load_f32`](crate::simd::load_f32)): the copy a
     /// walk works on, so that it never reads its caller's freshly written fields in wider loads.
     #[inline(always)]
@@ -55,6 +50,11 @@ impl Ray {
         }
     }
 
+    /// Whether the ray can hit anything. Rays with a NaN or infinite origin or direction, a zero
+    /// direction, a NaN bound, or `tnear > tfar` are invalid; every query answers them with a miss
+    /// (and "not occluded") instead of an error, so that one bad ray cannot spoil a batch. A
+    /// direction with no component of magnitude 1e-18 or more counts as zero: traversal clamps
+    /// reciprocals there (as Embree does), and hit distances beyond 1e18 would overflow.
     #[inline]
     pub fn is_valid(&self) -> bool {
         // Without branches (every single-ray query pays for this check): `0·x` is NaN exactly

@@ -58,8 +58,8 @@ pub(crate) const FAR_MEMORY_BYTES: usize = 32 << 20;
 /// The same threshold for the objects of a two-level scene, over all objects together: each
 /// instance enters its object from another side, so the rays of one view touch the whole object
 /// where a flat tree of that size is touched only where the view sees it. Measured on the big
-/// world (one 27 MB object): prefetching walks gained 10% on shadow rays, 5% on camera packets
-/// and diffuse rays (PERFORMANCE.md); the flat 27 MB sphereflake gained 2–3% on streams and lost
+/// world (one 27 MB object), one thread: prefetching walks gained 5–10% on shadow rays and 5–12% on
+/// camera packets and diffuse rays (PERFORMANCE.md); the flat 27 MB sphereflake gained 2–3% on streams and lost
 /// 3% on single rays, so flat trees keep [`FAR_MEMORY_BYTES`].
 pub(crate) const INSTANCED_FAR_MEMORY_BYTES: usize = 16 << 20;
 
