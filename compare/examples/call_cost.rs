@@ -7,7 +7,8 @@
 //! throughput claims come from the harness (`compare`), which traces the same rays on 2 threads.
 use std::time::Instant;
 
-use compare::embree::{self, Quality, RTC_INVALID_GEOMETRY_ID, RTCHit, RTCRay, RTCRayHit};
+use compare::embree::{self, Quality, RTC_INVALID_GEOMETRY_ID, RTCRayHit};
+use compare::harness::{embree_ray, empty_hit};
 use glam::Vec3;
 use strahl::{BuildConfig, Query, Ray, RayStream, SceneFile, raygen::Pcg32};
 
@@ -54,28 +55,7 @@ fn main() -> anyhow::Result<()> {
         let t = Instant::now();
         let mut ehits = 0;
         for i in 0..n {
-            let mut rh = RTCRayHit {
-                ray: RTCRay {
-                    org_x: rays.ox[i],
-                    org_y: rays.oy[i],
-                    org_z: rays.oz[i],
-                    tnear: rays.tnear[i],
-                    dir_x: rays.dx[i],
-                    dir_y: rays.dy[i],
-                    dir_z: rays.dz[i],
-                    time: 0.0,
-                    tfar: rays.tfar[i],
-                    mask: u32::MAX,
-                    id: i as u32,
-                    flags: 0,
-                },
-                hit: RTCHit {
-                    geomID: RTC_INVALID_GEOMETRY_ID,
-                    primID: RTC_INVALID_GEOMETRY_ID,
-                    instID: [RTC_INVALID_GEOMETRY_ID],
-                    ..Default::default()
-                },
-            };
+            let mut rh = RTCRayHit { ray: embree_ray(&rays, i), hit: empty_hit() };
             escene.intersect1(&mut rh, false);
             ehits += (rh.hit.geomID != RTC_INVALID_GEOMETRY_ID) as usize;
         }

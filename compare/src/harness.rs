@@ -775,8 +775,9 @@ fn collect_strahl(class: Class, hits: &HitStream, occ: &[bool], out: &mut Answer
     }
 }
 
+/// Ray `i` of `rays` as Embree's single-ray struct (mask all ones, id `i`).
 #[inline]
-fn embree_ray(rays: &RayStream, i: usize) -> RTCRay {
+pub fn embree_ray(rays: &RayStream, i: usize) -> RTCRay {
     RTCRay {
         org_x: rays.ox[i],
         org_y: rays.oy[i],
@@ -793,7 +794,8 @@ fn embree_ray(rays: &RayStream, i: usize) -> RTCRay {
     }
 }
 
-fn empty_hit() -> RTCHit {
+/// Embree's hit struct before a query: every id invalid.
+pub fn empty_hit() -> RTCHit {
     RTCHit {
         geomID: RTC_INVALID_GEOMETRY_ID,
         primID: RTC_INVALID_GEOMETRY_ID,
