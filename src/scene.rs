@@ -317,18 +317,13 @@ fn intersect_range<Q: Query + ?Sized>(
         // Incoherent rays of a flat scene: in groups of `OCTANT_GROUP` ordered by direction
         // octant, 16 at a time as a packet (walked per lane: they share no origin).
         out.clear(0);
-        let mut oct = [0u8; OCTANT_GROUP];
-        let mut order = [0u16; OCTANT_GROUP];
-        for g in (0..n).step_by(OCTANT_GROUP) {
-            let m = (n - g).min(OCTANT_GROUP);
-            octants(rays, start + g, &mut oct[..m]);
-            sort_by_octant(0..m as u16, &oct, &mut order[..m]);
-            let mut p = RayPacket::default();
-            for ids in order[..m].chunks(PACKET_WIDTH) {
+        let mut p = RayPacket::default();
+        each_octant_group(rays, start, n, |g, _, order| {
+            for ids in order.chunks(PACKET_WIDTH) {
                 rays.gather_packet_into(start + g, ids, &mut p);
                 q.intersect_packet_each(&p, |lane, h| out.set(g + ids[lane] as usize, h));
             }
-        }
+        });
     }
 }
 
@@ -343,6 +338,21 @@ fn octants(rays: &RayStream, base: usize, oct: &mut [u8]) {
     let (dx, dy, dz) = (&rays.dx[base..base + n], &rays.dy[base..base + n], &rays.dz[base..base + n]);
     for (i, o) in oct.iter_mut().enumerate() {
         *o = octant_of_dir(dx[i], dy[i], dz[i]) as u8;
+    }
+}
+
+/// Rays `start..start + n` in groups of [`OCTANT_GROUP`]: `f(g, oct, order)` for each group, where
+/// `g` is the group's first ray (from `start`), `oct` its rays' octants and `order` their indices
+/// (from `g`) sorted by octant, stably.
+#[inline(always)]
+fn each_octant_group(rays: &RayStream, start: usize, n: usize, mut f: impl FnMut(usize, &[u8], &[u16])) {
+    let mut oct = [0u8; OCTANT_GROUP];
+    let mut order = [0u16; OCTANT_GROUP];
+    for g in (0..n).step_by(OCTANT_GROUP) {
+        let m = (n - g).min(OCTANT_GROUP);
+        octants(rays, start + g, &mut oct[..m]);
+        sort_by_octant(0..m as u16, &oct, &mut order[..m]);
+        f(g, &oct[..m], &order[..m]);
     }
 }
 
@@ -414,13 +424,8 @@ fn occluded_range<Q: Query + ?Sized>(q: &Q, rays: &RayStream, start: usize, out:
 /// one direction octant, in stream order within each octant (Embree's octant-sorted occlusion
 /// stream), each group walked together by [`Query::occluded_octant_rays`].
 fn occluded_in_octant_groups<Q: Query + ?Sized>(q: &Q, rays: &RayStream, start: usize, out: &mut [bool]) {
-    let n = out.len();
-    let mut oct = [0u8; OCTANT_GROUP];
-    let mut order = [0u16; OCTANT_GROUP];
-    for g in (0..n).step_by(OCTANT_GROUP) {
-        let m = (n - g).min(OCTANT_GROUP);
-        octants(rays, start + g, &mut oct[..m]);
-        sort_by_octant(0..m as u16, &oct, &mut order[..m]);
+    each_octant_group(rays, start, out.len(), |g, oct, order| {
+        let m = order.len();
         let mut k = 0;
         while k < m {
             let o = oct[order[k] as usize];
@@ -435,7 +440,7 @@ fn occluded_in_octant_groups<Q: Query + ?Sized>(q: &Q, rays: &RayStream, start: 
             }
             k = e;
         }
-    }
+    });
 }
 
 /// Mutable views of one range of a [`HitStream`].
