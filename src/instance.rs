@@ -22,7 +22,8 @@ use rayon::prelude::*;
 use crate::bvh::build::{self, Aabb, BuildNode, PrimRef};
 use crate::bvh::node::{EMPTY, MAX_BLOCK_INDEX, Node, leaf_blocks, leaf_ref};
 use crate::bvh::traverse::{
-    BoxRay, LeafHit, PacketBoxes, PacketHits, Stack, dispatch, each_lane_alone, walk_packet, walk1, with_stack,
+    BoxRay, LaneSlabs, LeafHit, PacketBoxes, PacketHits, SlabTerms, Stack, dispatch, each_lane_alone, walk_packet,
+    walk1, with_stack,
 };
 use crate::bvh::{BoxTest, BuildConfig, INSTANCED_FAR_MEMORY_BYTES};
 use crate::error::{Error, Result};
@@ -296,7 +297,20 @@ impl InstancedScene {
         root: u32,
         stack: &mut Stack,
     ) -> Option<(u32, LeafHit)> {
-        let br = BoxRay::new(ray);
+        self.trace1_from_terms::<ANY, K, CONS>(ray, SlabTerms::of(ray), root, stack)
+    }
+
+    /// [`trace1_from`](Self::trace1_from) with the ray's slab terms already computed (a packet's
+    /// lane).
+    #[inline(always)]
+    fn trace1_from_terms<const ANY: bool, K: Kernel, const CONS: bool>(
+        &self,
+        ray: &Ray,
+        terms: SlabTerms,
+        root: u32,
+        stack: &mut Stack,
+    ) -> Option<(u32, LeafHit)> {
+        let br = BoxRay::with_terms(terms, ray.tnear);
         let mut tfar = ray.tfar;
         let mut best = None;
         let base = stack.push_root(root);
@@ -355,8 +369,8 @@ impl InstancedScene {
                     p,
                     lanes,
                     tfar,
-                    |ray| {
-                        let (k, h) = self.trace1_from::<ANY, K, CONS>(ray, leaf, stack)?;
+                    |l, ray| {
+                        let (k, h) = self.trace1_from_terms::<ANY, K, CONS>(ray, pb.slabs.lane(l), leaf, stack)?;
                         Some((h.t, (k, h)))
                     },
                     |l, (k, h)| out.set(l, &self.world_hit(k, &self.object_hit(k, &h))),
@@ -371,7 +385,7 @@ impl InstancedScene {
                 if active == 0 {
                     continue;
                 }
-                let q = object_packet(&pl.to_object, &pb, *tfar, p, active);
+                let (q, qs) = object_packet(&pl.to_object, &pb, *tfar, p, active);
                 let bvh = self.objects[pl.object as usize].bvh();
                 if !ANY && pb.frustum.is_none() {
                     // Incoherent closest-hit rays: each lane that enters the instance walks the
@@ -383,8 +397,8 @@ impl InstancedScene {
                         &q,
                         active,
                         tfar,
-                        |ray| {
-                            let h = bvh.trace1_from::<false, K, CONS>(ray, bvh.root, stack)?;
+                        |l, ray| {
+                            let h = bvh.trace1_from_terms::<false, K, CONS>(ray, qs.lane(l), bvh.root, stack)?;
                             Some((h.t, h))
                         },
                         |l, h| out.set(l, &self.world_hit(k as u32, &bvh.hit_record(&h))),
@@ -443,28 +457,38 @@ fn object_ray(to_object: &Affine3A, ray: &Ray, tfar: f32) -> Ray {
     }
 }
 
-/// The lanes `active` of a packet in object space, with their current `tfar`.
+/// The lanes `active` of a packet in object space, with their current `tfar`, and their slab
+/// terms.
 #[inline(always)]
-fn object_packet(to_object: &Affine3A, pb: &PacketBoxes, tfar: Pf, p: &RayPacket, active: u32) -> RayPacket {
+fn object_packet(
+    to_object: &Affine3A,
+    pb: &PacketBoxes,
+    tfar: Pf,
+    p: &RayPacket,
+    active: u32,
+) -> (RayPacket, LaneSlabs) {
     let m = to_object.matrix3;
     let tr = to_object.translation;
     // The operations and their order of glam's `transform_point3` / `transform_vector3` (no fused
     // multiply-add), so a lane is moved exactly as the single-ray query moves it.
     let row = |a: usize, v: &[Pf; 3], with_t: bool| {
         let x = v[0] * Pf::splat(m.x_axis[a]) + v[1] * Pf::splat(m.y_axis[a]) + v[2] * Pf::splat(m.z_axis[a]);
-        if with_t { (x + Pf::splat(tr[a])).to_array() } else { x.to_array() }
+        if with_t { x + Pf::splat(tr[a]) } else { x }
     };
-    RayPacket {
-        ox: row(0, &pb.o, true),
-        oy: row(1, &pb.o, true),
-        oz: row(2, &pb.o, true),
-        dx: row(0, &pb.d, false),
-        dy: row(1, &pb.d, false),
-        dz: row(2, &pb.d, false),
+    let o = [row(0, &pb.o, true), row(1, &pb.o, true), row(2, &pb.o, true)];
+    let d = [row(0, &pb.d, false), row(1, &pb.d, false), row(2, &pb.d, false)];
+    let q = RayPacket {
+        ox: o[0].to_array(),
+        oy: o[1].to_array(),
+        oz: o[2].to_array(),
+        dx: d[0].to_array(),
+        dy: d[1].to_array(),
+        dz: d[2].to_array(),
         tnear: p.tnear,
         tfar: tfar.to_array(),
         active,
-    }
+    };
+    (q, LaneSlabs::of(&o, &d))
 }
 
 /// Levels of an object's tree whose boxes bound its instances: the world box of an instance is the

@@ -620,13 +620,26 @@ impl Bvh {
         root: u32,
         stack: &mut Stack,
     ) -> Option<LeafHit> {
+        self.trace1_from_terms::<ANY, K, CONS>(ray, SlabTerms::of(ray), root, stack)
+    }
+
+    /// [`trace1_from`](Self::trace1_from) with the ray's slab terms already computed (a packet's
+    /// lane, see [`LaneSlabs`]).
+    #[inline(always)]
+    pub(crate) fn trace1_from_terms<const ANY: bool, K: Kernel, const CONS: bool>(
+        &self,
+        ray: &Ray,
+        terms: SlabTerms,
+        root: u32,
+        stack: &mut Stack,
+    ) -> Option<LeafHit> {
         if root == EMPTY {
             return None;
         }
         let base = stack.push_root(root);
         let r4 = Ray4::new(ray.origin, ray.dir);
         let pre = K::pre(&r4);
-        let br = BoxRay::new(ray);
+        let br = BoxRay::with_terms(terms, ray.tnear);
         let mut tfar = ray.tfar;
         let mut best = None;
         walk1::<ANY, CONS>(&self.nodes, self.prefetch, &br, stack, base, &mut tfar, |leaf, tfar, _| {
@@ -702,8 +715,8 @@ impl Bvh {
                         p,
                         lanes,
                         tfar,
-                        |ray| {
-                            let h = self.trace1_from::<ANY, K, CONS>(ray, leaf, stack)?;
+                        |l, ray| {
+                            let h = self.trace1_from_terms::<ANY, K, CONS>(ray, pb.slabs.lane(l), leaf, stack)?;
                             Some((h.t, h))
                         },
                         |l, h| out.set(l, &self.hit_record(&h)),
@@ -781,7 +794,7 @@ pub(crate) struct BoxRay {
 
 /// One ray's slab-test terms as scalars: what [`BoxRay`] splats over a node's children, and what
 /// the occlusion streams (`stream.rs`) keep per ray.
-pub(super) struct SlabTerms {
+pub(crate) struct SlabTerms {
     /// Clamped reciprocal direction.
     pub rd: Vec3,
     /// `origin · rd`.
@@ -796,10 +809,15 @@ pub(super) struct SlabTerms {
 
 impl SlabTerms {
     #[inline(always)]
-    pub(super) fn of(ray: &Ray) -> Self {
+    pub(crate) fn of(ray: &Ray) -> Self {
         let rd = Vec3::new(safe_rcp(ray.dir.x), safe_rcp(ray.dir.y), safe_rcp(ray.dir.z));
         let od = ray.origin * rd;
-        let pad = WIDEN * od.abs().max_element();
+        Self::from_parts(rd, od, WIDEN * od.abs().max_element())
+    }
+
+    /// The terms from the clamped reciprocal direction, `origin · rd` and the pad.
+    #[inline(always)]
+    fn from_parts(rd: Vec3, od: Vec3, pad: f32) -> Self {
         let widen = 1.0 + WIDEN;
         Self { rd, od, rdf: rd * widen, odf: od * widen - Vec3::splat(pad), widen, pad }
     }
@@ -813,13 +831,14 @@ impl SlabTerms {
 }
 
 impl BoxRay {
+    /// The node-test form of a ray's slab terms, for the interval from `tnear`.
     #[inline(always)]
-    pub fn new(ray: &Ray) -> Self {
-        let SlabTerms { rd: rdir, od: ordir, rdf, odf, widen, pad } = SlabTerms::of(ray);
+    pub(crate) fn with_terms(terms: SlabTerms, tnear: f32) -> Self {
+        let SlabTerms { rd: rdir, od: ordir, rdf, odf, widen, pad } = terms;
         let near = [(rdir.x < 0.0) as usize, 2 + (rdir.y < 0.0) as usize, 4 + (rdir.z < 0.0) as usize];
         // `-0.0 + 0.0` is `+0.0`, whose bits order correctly against positive distances.
-        let int_ok = ray.tnear >= 0.0;
-        let tnear = if int_ok { ray.tnear + 0.0 } else { ray.tnear };
+        let int_ok = tnear >= 0.0;
+        let tnear = if int_ok { tnear + 0.0 } else { tnear };
         Self {
             rd: [Nf::splat(rdir.x), Nf::splat(rdir.y), Nf::splat(rdir.z)],
             od: [Nf::splat(ordir.x), Nf::splat(ordir.y), Nf::splat(ordir.z)],
@@ -924,9 +943,8 @@ fn prefetch_inner(nodes: &[Node], child: &[u32; WIDTH], mut mask: u32) {
 pub(crate) struct PacketBoxes {
     pub o: [Pf; 3],
     pub d: [Pf; 3],
-    rdir: [Pf; 3],
-    od: [Pf; 3],
-    pad: Pf,
+    /// Every lane's slab terms, also what the lanes handed to single-ray walks start from.
+    pub slabs: LaneSlabs,
     widen: Pf,
     /// Per lane; `+inf` in lanes out of the query, so no node or triangle test passes them.
     pub tnear: Pf,
@@ -961,22 +979,49 @@ impl PacketBoxes {
         if live == 0 {
             return None;
         }
-        let rcp = |x: Pf| {
-            let small = x.abs().simd_lt(Pf::splat(MIN_RCP_INPUT));
-            Pf::splat(1.0) / small.select(Pf::splat(MIN_RCP_INPUT).copysign(x), x)
-        };
-        let rdir = [rcp(d[0]), rcp(d[1]), rcp(d[2])];
-        let od = [o[0] * rdir[0], o[1] * rdir[1], o[2] * rdir[2]];
-        let pad = od[0].abs().fast_max(od[1].abs()).fast_max(od[2].abs()) * Pf::splat(WIDEN);
+        let slabs = LaneSlabs::of(&o, &d);
         let live_mask = lane_mask(live);
         let tnear = live_mask.select(tn, inf);
         let tfar = live_mask.select(tf, Pf::splat(f32::NEG_INFINITY));
         // `-0.0 + 0.0` is `+0.0`; lanes out of the query hold `+inf`.
         let int_ok = tnear.simd_ge(Pf::splat(0.0)).to_bitmask() == low_bits(PACKET_WIDTH);
         let tnear = if int_ok { tnear + Pf::splat(0.0) } else { tnear };
-        let frustum = Frustum::new(&o, &rdir, tnear, live, live_mask);
+        let frustum = Frustum::new(&o, &slabs.rd, tnear, live, live_mask);
         let widen = Pf::splat(1.0 + WIDEN);
-        Some((Self { o, d, rdir, od, pad, widen, tnear, live, int_ok, frustum }, tfar))
+        Some((Self { o, d, slabs, widen, tnear, live, int_ok, frustum }, tfar))
+    }
+}
+
+/// The slab terms of all lanes of a packet, computed 16 at a time: what the per-lane box tests
+/// use, and what a lane handed to a single-ray walk takes as its own ([`lane`](Self::lane)), as
+/// Embree's hybrid walk hands its lanes the packet's reciprocals, so that no lane's walk waits
+/// for three scalar divisions before its first node test.
+pub(crate) struct LaneSlabs {
+    rd: [Pf; 3],
+    od: [Pf; 3],
+    pad: Pf,
+}
+
+impl LaneSlabs {
+    /// The terms of the rays with origins `o` and directions `d`, lane by lane the values
+    /// [`SlabTerms::of`] computes for one ray.
+    #[inline(always)]
+    pub fn of(o: &[Pf; 3], d: &[Pf; 3]) -> Self {
+        let rcp = |x: Pf| {
+            let small = x.abs().simd_lt(Pf::splat(MIN_RCP_INPUT));
+            Pf::splat(1.0) / small.select(Pf::splat(MIN_RCP_INPUT).copysign(x), x)
+        };
+        let rd = [rcp(d[0]), rcp(d[1]), rcp(d[2])];
+        let od = [o[0] * rd[0], o[1] * rd[1], o[2] * rd[2]];
+        let pad = od[0].abs().fast_max(od[1].abs()).fast_max(od[2].abs()) * Pf::splat(WIDEN);
+        Self { rd, od, pad }
+    }
+
+    /// Lane `l`'s terms.
+    #[inline(always)]
+    pub fn lane(&self, l: usize) -> SlabTerms {
+        let at = |v: &[Pf; 3]| Vec3::new(v[0].as_array()[l], v[1].as_array()[l], v[2].as_array()[l]);
+        SlabTerms::from_parts(at(&self.rd), at(&self.od), self.pad.as_array()[l])
     }
 }
 
@@ -993,8 +1038,8 @@ impl PacketBoxes {
     #[inline(always)]
     fn enter<const CONS: bool>(&self, lo: [f32; 3], hi: [f32; 3], tfar: Pf) -> (u32, Pf) {
         let slab = |a: usize| {
-            let t0 = Pf::splat(lo[a]).mul_sub(self.rdir[a], self.od[a]);
-            let t1 = Pf::splat(hi[a]).mul_sub(self.rdir[a], self.od[a]);
+            let t0 = Pf::splat(lo[a]).mul_sub(self.slabs.rd[a], self.slabs.od[a]);
+            let t1 = Pf::splat(hi[a]).mul_sub(self.slabs.rd[a], self.slabs.od[a]);
             (t0, t1)
         };
         let ((x0, x1), (y0, y1), (z0, z1)) = (slab(0), slab(1), slab(2));
@@ -1007,7 +1052,7 @@ impl PacketBoxes {
         } else {
             x0.fast_min(x1).fast_max(y0.fast_min(y1)).fast_max(z0.fast_min(z1).fast_max(self.tnear))
         };
-        let tf = if CONS { tf.mul_add(self.widen, self.pad) } else { tf };
+        let tf = if CONS { tf.mul_add(self.widen, self.slabs.pad) } else { tf };
         let mask = if self.int_ok { tn.le_mask(tf) } else { tn.simd_le(tf) };
         (mask.to_bitmask(), mask.select(tn, Pf::splat(f32::INFINITY)))
     }
@@ -1022,7 +1067,7 @@ pub(crate) fn each_lane_alone<const ANY: bool, H>(
     p: &RayPacket,
     lanes: u32,
     tfar: &mut Pf,
-    mut walk: impl FnMut(&Ray) -> Option<(f32, H)>,
+    mut walk: impl FnMut(usize, &Ray) -> Option<(f32, H)>,
     mut record: impl FnMut(usize, H),
 ) -> u32 {
     let mut t = tfar.to_array();
@@ -1030,7 +1075,7 @@ pub(crate) fn each_lane_alone<const ANY: bool, H>(
     while bits != 0 {
         let l = bits.trailing_zeros() as usize;
         bits &= bits - 1;
-        if let Some((th, h)) = walk(&Ray { tfar: t[l], ..p.get(l) }) {
+        if let Some((th, h)) = walk(l, &Ray { tfar: t[l], ..p.get(l) }) {
             hits |= 1 << l;
             if ANY {
                 t[l] = f32::NEG_INFINITY;
@@ -1203,4 +1248,44 @@ pub(crate) fn walk_packet<const ANY: bool, const CONS: bool>(
         }
     }
     stack.len = base;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A lane handed to a single-ray walk must see exactly the terms the single-ray API computes
+    /// for the same ray, or the two could disagree at box edges.
+    #[test]
+    fn lane_slab_terms_equal_the_single_ray_terms_bit_for_bit() {
+        let dirs = [
+            Vec3::new(0.3, -0.8, 0.52),
+            Vec3::new(0.0, 1.0, 0.0),
+            Vec3::new(-0.0, -1.0, 1e-30),
+            Vec3::new(1e-19, -1e-17, 2.0),
+            Vec3::new(-3.0e5, 7.0e-3, -0.25),
+            Vec3::new(1.0, 1.0, -1.0),
+        ];
+        let origins =
+            [Vec3::ZERO, Vec3::new(1e6, -3.5e4, 0.125), Vec3::new(-2.0, 7.5, -1e-20), Vec3::new(3e30, -1.0, 4.0)];
+        let rays: Vec<Ray> = dirs.iter().flat_map(|&d| origins.iter().map(move |&o| Ray::new(o, d))).collect();
+        for chunk in rays.chunks(PACKET_WIDTH) {
+            let lane = |f: fn(&Ray) -> f32| Pf::new(std::array::from_fn(|l| chunk.get(l).map_or(1.0, f)));
+            let o = [lane(|r| r.origin.x), lane(|r| r.origin.y), lane(|r| r.origin.z)];
+            let d = [lane(|r| r.dir.x), lane(|r| r.dir.y), lane(|r| r.dir.z)];
+            let slabs = LaneSlabs::of(&o, &d);
+            for (l, ray) in chunk.iter().enumerate() {
+                let (a, b) = (slabs.lane(l), SlabTerms::of(ray));
+                let bits = |t: &SlabTerms| {
+                    [t.rd, t.od, t.rdf, t.odf]
+                        .map(|v| v.to_array().map(f32::to_bits))
+                        .concat()
+                        .into_iter()
+                        .chain([t.widen.to_bits(), t.pad.to_bits()])
+                        .collect::<Vec<u32>>()
+                };
+                assert_eq!(bits(&a), bits(&b), "{ray:?}");
+            }
+        }
+    }
 }
