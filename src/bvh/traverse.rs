@@ -592,14 +592,14 @@ impl Bvh {
     /// Closest hit (`ANY = false`) or first hit found (`ANY = true`) of one ray.
     #[inline(always)]
     pub fn trace1<const ANY: bool>(&self, ray: &Ray) -> Option<LeafHit> {
-        if !ray.read_fields().is_valid() || self.root == EMPTY {
+        if self.root == EMPTY {
             return None;
         }
         with_stack(|stack| dispatch!(self.test, self.box_test, |K, C| self.trace1_with::<ANY, K, C>(ray, stack)))
     }
 
-    /// [`trace1`](Self::trace1) with a chosen kernel, on `stack` above its current entries; the
-    /// ray must be valid.
+    /// [`trace1`](Self::trace1) with a chosen kernel, on `stack` above its current entries.
+    /// Invalid rays miss.
     #[inline(never)]
     pub(crate) fn trace1_with<const ANY: bool, K: Kernel, const CONS: bool>(
         &self,
@@ -607,8 +607,13 @@ impl Bvh {
         stack: &mut Stack,
     ) -> Option<LeafHit> {
         // The walk's own copy, read field by field: this call's callers (the single-ray API, an
-        // instance's object walk) have just written the ray (see `Ray::read_fields`).
-        self.trace1_from::<ANY, K, CONS>(&ray.read_fields(), self.root, stack)
+        // instance's object walk) have just written the ray (see `Ray::read_fields`). One read
+        // for both the validity check and the walk.
+        let ray = ray.read_fields();
+        if !ray.is_valid() {
+            return None;
+        }
+        self.trace1_from::<ANY, K, CONS>(&ray, self.root, stack)
     }
 
     /// [`trace1_with`](Self::trace1_with) over the subtree at `root` (a node or a leaf): the
