@@ -272,7 +272,7 @@ impl InstancedScene {
     }
 
     fn trace1<const ANY: bool>(&self, ray: &Ray) -> Option<(u32, LeafHit)> {
-        if !ray.read_fields().is_valid() || self.root == EMPTY {
+        if self.root == EMPTY {
             return None;
         }
         with_stack(|stack| dispatch!(self.test, self.box_test, |K, C| self.trace1_with::<ANY, K, C>(ray, stack)))
@@ -280,13 +280,19 @@ impl InstancedScene {
 
     /// The instance level's walk; at each instance the object's walk continues on the same stack
     /// with the same kernel, so entering an instance costs one transform and no dispatch.
+    /// Invalid rays miss.
     fn trace1_with<const ANY: bool, K: Kernel, const CONS: bool>(
         &self,
         ray: &Ray,
         stack: &mut Stack,
     ) -> Option<(u32, LeafHit)> {
-        // Read field by field, as the object walks do (see `Ray::read_fields`).
-        self.trace1_from::<ANY, K, CONS>(&ray.read_fields(), self.root, stack)
+        // Read field by field, as the object walks do (see `Ray::read_fields`), once for both
+        // the validity check and the walk.
+        let ray = ray.read_fields();
+        if !ray.is_valid() {
+            return None;
+        }
+        self.trace1_from::<ANY, K, CONS>(&ray, self.root, stack)
     }
 
     /// [`trace1_with`](Self::trace1_with) over the instance subtree at `root`.
