@@ -330,7 +330,7 @@ impl InstancedScene {
                 if !(r.origin.is_finite() && r.dir.is_finite()) {
                     continue;
                 }
-                if let Some(h) = self.objects[p.object as usize].bvh().trace1_with::<ANY, K, CONS>(&r, stack) {
+                if let Some(h) = self.objects[p.object as usize].bvh().trace1_with::<ANY, false, K, CONS>(&r, stack) {
                     *tfar = h.t;
                     best = Some((k as u32, h));
                     if ANY {
@@ -391,14 +391,16 @@ impl InstancedScene {
                 if active == 0 {
                     continue;
                 }
-                let (q, qs) = object_packet(&pl.to_object, &pb, *tfar, p, active);
+                let (q, [qo, qd]) = object_packet(&pl.to_object, &pb, *tfar, p, active);
                 let bvh = self.objects[pl.object as usize].bvh();
                 if !ANY && pb.frustum.is_none() {
                     // Incoherent closest-hit rays: each lane that enters the instance walks the
                     // object alone, as Embree's instances hand their lanes to the object's hybrid
                     // walk, which takes single rays for so few lanes. Diffuse packets run 10–15%
                     // faster this way than through the object's packet walk; occlusion packets lost
-                    // 13% on the forest, so they keep it (PERFORMANCE.md).
+                    // 13% on the forest, so they keep it (PERFORMANCE.md). The lanes' slab terms
+                    // are computed here, 16 at a time.
+                    let qs = LaneSlabs::of(&qo, &qd);
                     out.mask |= each_lane_alone::<false, _>(
                         &q,
                         active,
@@ -463,8 +465,8 @@ fn object_ray(to_object: &Affine3A, ray: &Ray, tfar: f32) -> Ray {
     }
 }
 
-/// The lanes `active` of a packet in object space, with their current `tfar`, and their slab
-/// terms.
+/// The lanes `active` of a packet in object space, with their current `tfar`, and the moved
+/// origins and directions as vectors.
 #[inline(always)]
 fn object_packet(
     to_object: &Affine3A,
@@ -472,7 +474,7 @@ fn object_packet(
     tfar: Pf,
     p: &RayPacket,
     active: u32,
-) -> (RayPacket, LaneSlabs) {
+) -> (RayPacket, [[Pf; 3]; 2]) {
     let m = to_object.matrix3;
     let tr = to_object.translation;
     // The operations and their order of glam's `transform_point3` / `transform_vector3` (no fused
@@ -494,7 +496,7 @@ fn object_packet(
         tfar: tfar.to_array(),
         active,
     };
-    (q, LaneSlabs::of(&o, &d))
+    (q, [o, d])
 }
 
 /// Levels of an object's tree whose boxes bound its instances: the world box of an instance is the

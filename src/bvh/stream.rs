@@ -84,7 +84,7 @@ impl Bvh {
                 continue;
             }
             if octant_of(&ray) != octant {
-                if self.trace1_with::<true, K, CONS>(&ray, stack).is_some() {
+                if self.trace1_with::<true, false, K, CONS>(&ray, stack).is_some() {
                     alone |= 1 << i;
                 }
                 continue;

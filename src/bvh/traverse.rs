@@ -595,22 +595,23 @@ impl Bvh {
         if self.root == EMPTY {
             return None;
         }
-        with_stack(|stack| dispatch!(self.test, self.box_test, |K, C| self.trace1_with::<ANY, K, C>(ray, stack)))
+        with_stack(|stack| dispatch!(self.test, self.box_test, |K, C| self.trace1_with::<ANY, true, K, C>(ray, stack)))
     }
 
-    /// [`trace1`](Self::trace1) with a chosen kernel, on `stack` above its current entries.
-    /// Invalid rays miss.
+    /// [`trace1`](Self::trace1) with a chosen kernel, on `stack` above its current entries. With
+    /// `CHECK` (the single-ray API) an invalid ray misses; without (an instance's object walk,
+    /// a stream's lone ray), the caller has checked the ray.
     #[inline(never)]
-    pub(crate) fn trace1_with<const ANY: bool, K: Kernel, const CONS: bool>(
+    pub(crate) fn trace1_with<const ANY: bool, const CHECK: bool, K: Kernel, const CONS: bool>(
         &self,
         ray: &Ray,
         stack: &mut Stack,
     ) -> Option<LeafHit> {
         // The walk's own copy, read field by field: this call's callers (the single-ray API, an
-        // instance's object walk) have just written the ray (see `Ray::read_fields`). One read
-        // for both the validity check and the walk.
+        // instance's object walk) have just written the ray (see `Ray::read_fields`). The API's
+        // validity check reads the same copy.
         let ray = ray.read_fields();
-        if !ray.is_valid() {
+        if CHECK && !ray.is_valid() {
             return None;
         }
         self.trace1_from::<ANY, K, CONS>(&ray, self.root, stack)
