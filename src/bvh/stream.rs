@@ -10,7 +10,7 @@ use glam::Vec3;
 
 use super::Bvh;
 use super::node::{EMPTY, WIDTH, is_leaf, leaf_blocks};
-use super::traverse::{BoxTest, SlabTerms, Stack, dispatch, with_stack};
+use super::traverse::{BoxTest, FAR_WIDEN, SlabTerms, Stack, dispatch, with_stack};
 use crate::geometry::badouel::Badouel;
 use crate::geometry::moeller::Moller;
 use crate::geometry::triangle::TriangleTest;
@@ -69,7 +69,6 @@ impl Bvh {
         let mut r4 = [Ray4::new(Vec3::ZERO, Vec3::X); STREAM_RAYS];
         let mut tfar = [0.0f32; STREAM_RAYS];
         let mut active = 0u32;
-        let mut widen = 1.0;
         // Rays walked alone and found occluded.
         let mut alone = 0u32;
         for (i, &id) in ids[..n].iter().enumerate() {
@@ -96,7 +95,6 @@ impl Bvh {
                 sr.od[a][i] = t.od[a];
             }
             sr.pad[i] = t.pad;
-            widen = t.widen;
             sr.tnear[i] = ray.tnear;
             sr.tfar_box[i] = t.far_limit::<CONS>(ray.tfar);
             tfar[i] = ray.tfar;
@@ -140,7 +138,7 @@ impl Bvh {
                     let n1 = bn[1].mul_sub(r1, o1);
                     let n2 = bn[2].mul_sub(r2, o2);
                     let f = bf[0].mul_sub(r0, o0).fast_min(bf[1].mul_sub(r1, o1)).fast_min(bf[2].mul_sub(r2, o2));
-                    let f = if CONS { f.mul_add(s(widen), s(sr.pad[i])) } else { f };
+                    let f = if CONS { f.mul_add(s(FAR_WIDEN), s(sr.pad[i])) } else { f };
                     let tn = n0.fast_max(n1).fast_max(n2.fast_max(s(sr.tnear[i])));
                     let tf = f.fast_min(s(sr.tfar_box[i]));
                     let entered: Ni = bytemuck::cast(tn.simd_le(tf));

@@ -59,6 +59,9 @@ const MIN_RCP_INPUT: f32 = 1e-18;
 /// Relative widening of the far plane distance: 16 ulps, well above the 2–3 roundings involved.
 const WIDEN: f32 = 1.0 / (1u32 << 20) as f32;
 
+/// The conservative test's factor on far distances, `1 + w` (with `w` = [`WIDEN`]).
+pub(super) const FAR_WIDEN: f32 = 1.0 + WIDEN;
+
 /// Stack entries: at most `WIDTH − 1` pushes per wide level; SAH levels are capped at
 /// `MEDIAN_DEPTH` and median levels below halve the set (at most 32 binary, so 32 wide levels).
 /// Twice that: an instance level and an object level share one stack. Rounded up to a power of
@@ -791,8 +794,8 @@ pub(crate) struct BoxRay {
     near: [usize; 3],
     far: [usize; 3],
     tnear: Nf,
-    /// `(widen, pad)` of the conservative test, for the ray's own `tfar`.
-    far_scale: (f32, f32),
+    /// The conservative test's pad for the ray's own `tfar` (widened by [`FAR_WIDEN`]).
+    far_pad: f32,
     /// Whether `tnear ≥ 0`: then the minima and maxima run as integer operations (see
     /// [`BitOrder`]), else as float ones.
     int_ok: bool,
@@ -808,8 +811,7 @@ pub(crate) struct SlabTerms {
     /// The conservative test's far-plane terms: `rd·(1 + w)` and `od·(1 + w) − pad`.
     pub rdf: Vec3,
     pub odf: Vec3,
-    /// The conservative test's relative widening `1 + w` and absolute pad.
-    pub widen: f32,
+    /// The conservative test's absolute pad (its relative widening is [`FAR_WIDEN`]).
     pub pad: f32,
 }
 
@@ -824,15 +826,14 @@ impl SlabTerms {
     /// The terms from the clamped reciprocal direction, `origin · rd` and the pad.
     #[inline(always)]
     fn from_parts(rd: Vec3, od: Vec3, pad: f32) -> Self {
-        let widen = 1.0 + WIDEN;
-        Self { rd, od, rdf: rd * widen, odf: od * widen - Vec3::splat(pad), widen, pad }
+        Self { rd, od, rdf: rd * FAR_WIDEN, odf: od * FAR_WIDEN - Vec3::splat(pad), pad }
     }
 
     /// The far distance a slab test compares with for a closest hit so far at `tfar`: widened by
     /// the rounding bound for the conservative test.
     #[inline(always)]
     pub(super) fn far_limit<const CONS: bool>(&self, tfar: f32) -> f32 {
-        if CONS { tfar.mul_add(self.widen, self.pad) } else { tfar }
+        if CONS { tfar.mul_add(FAR_WIDEN, self.pad) } else { tfar }
     }
 }
 
@@ -840,7 +841,7 @@ impl BoxRay {
     /// The node-test form of a ray's slab terms, for the interval from `tnear`.
     #[inline(always)]
     pub(crate) fn with_terms(terms: SlabTerms, tnear: f32) -> Self {
-        let SlabTerms { rd: rdir, od: ordir, rdf, odf, widen, pad } = terms;
+        let SlabTerms { rd: rdir, od: ordir, rdf, odf, pad } = terms;
         let near = [(rdir.x < 0.0) as usize, 2 + (rdir.y < 0.0) as usize, 4 + (rdir.z < 0.0) as usize];
         // `-0.0 + 0.0` is `+0.0`, whose bits order correctly against positive distances.
         let int_ok = tnear >= 0.0;
@@ -853,7 +854,7 @@ impl BoxRay {
             near,
             far: [near[0] ^ 1, near[1] ^ 1, near[2] ^ 1],
             tnear: Nf::splat(tnear),
-            far_scale: (widen, pad),
+            far_pad: pad,
             int_ok,
         }
     }
@@ -866,7 +867,7 @@ impl BoxRay {
         let (n0, n1, n2) = (near(0), near(1), near(2));
         let (f0, f1, f2, tf) = if CONS {
             let far = |a: usize| Nf::new(b[self.far[a]]).mul_sub(self.rdf[a], self.odf[a]);
-            (far(0), far(1), far(2), Nf::splat(tfar.mul_add(self.far_scale.0, self.far_scale.1)))
+            (far(0), far(1), far(2), Nf::splat(tfar.mul_add(FAR_WIDEN, self.far_pad)))
         } else {
             let far = |a: usize| Nf::new(b[self.far[a]]).mul_sub(self.rd[a], self.od[a]);
             (far(0), far(1), far(2), Nf::splat(tfar))
@@ -951,7 +952,6 @@ pub(crate) struct PacketBoxes {
     pub d: [Pf; 3],
     /// Every lane's slab terms, also what the lanes handed to single-ray walks start from.
     pub slabs: LaneSlabs,
-    widen: Pf,
     /// Per lane; `+inf` in lanes out of the query, so no node or triangle test passes them.
     pub tnear: Pf,
     /// The active lanes with valid rays.
@@ -993,8 +993,7 @@ impl PacketBoxes {
         let int_ok = tnear.simd_ge(Pf::splat(0.0)).to_bitmask() == low_bits(PACKET_WIDTH);
         let tnear = if int_ok { tnear + Pf::splat(0.0) } else { tnear };
         let frustum = Frustum::new(&o, &slabs.rd, tnear, live, live_mask);
-        let widen = Pf::splat(1.0 + WIDEN);
-        Some((Self { o, d, slabs, widen, tnear, live, int_ok, frustum }, tfar))
+        Some((Self { o, d, slabs, tnear, live, int_ok, frustum }, tfar))
     }
 }
 
@@ -1058,7 +1057,7 @@ impl PacketBoxes {
         } else {
             x0.fast_min(x1).fast_max(y0.fast_min(y1)).fast_max(z0.fast_min(z1).fast_max(self.tnear))
         };
-        let tf = if CONS { tf.mul_add(self.widen, self.slabs.pad) } else { tf };
+        let tf = if CONS { tf.mul_add(Pf::splat(FAR_WIDEN), self.slabs.pad) } else { tf };
         let mask = if self.int_ok { tn.le_mask(tf) } else { tn.simd_le(tf) };
         (mask.to_bitmask(), mask.select(tn, Pf::splat(f32::INFINITY)))
     }
@@ -1287,7 +1286,7 @@ mod tests {
                         .map(|v| v.to_array().map(f32::to_bits))
                         .concat()
                         .into_iter()
-                        .chain([t.widen.to_bits(), t.pad.to_bits()])
+                        .chain([t.pad.to_bits()])
                         .collect::<Vec<u32>>()
                 };
                 assert_eq!(bits(&a), bits(&b), "{ray:?}");
