@@ -90,13 +90,21 @@ fn every_query_matches_brute_force_over_instances() {
 #[test]
 fn packets_and_streams_equal_single_rays() {
     let (objects, instances) = world(40, 3.0, Vec3::ZERO, 7);
-    let scene = InstancedScene::build(objects, instances, &BuildConfig::default()).unwrap();
+    let scene = InstancedScene::build(objects, instances.clone(), &BuildConfig::default()).unwrap();
     let mut rays = rays(1000, 3.0, Vec3::ZERO, 8);
     // Camera-like packets too: 16 rays from one origin, so the frustum path is taken.
     let eye = Vec3::new(0.5, 9.0, -11.0);
     let mut rng = Pcg32::new(9, 1);
     for _ in 0..(16 * 40) {
         rays.push(Ray::new(eye, -eye + rng_vec(&mut rng, -2.0, 2.0)));
+    }
+    // Diffuse-like packets: 16 rays from points a hair apart inside an instance, in random
+    // directions, so the object is walked as a packet (close origins, no shared one).
+    for inst in instances.iter().take(20) {
+        let at = Vec3::from(inst.transform.translation);
+        for _ in 0..PACKET_WIDTH {
+            rays.push(Ray::new(at + rng_vec(&mut rng, -1e-3, 1e-3), uniform_direction(&mut rng)));
+        }
     }
     // And a few bad rays in between.
     rays[5] = Ray::new(Vec3::NAN, Vec3::X);

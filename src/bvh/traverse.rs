@@ -1031,6 +1031,19 @@ impl LaneSlabs {
 }
 
 impl PacketBoxes {
+    /// The largest extent, over the three axes, of the live lanes' origins.
+    #[inline(always)]
+    pub fn origin_extent(&self) -> f32 {
+        let live = lane_mask(self.live);
+        let mut e = 0.0f32;
+        for o in &self.o {
+            let hi = hmax(live.select(*o, Pf::splat(f32::NEG_INFINITY)));
+            let lo = hmin(live.select(*o, Pf::splat(f32::INFINITY)));
+            e = e.max(hi - lo);
+        }
+        e
+    }
+
     /// The lanes that enter the box `lo..hi` before their `tfar` (the per-lane slab test, with the
     /// conservative widening if `CONS`).
     #[inline(always)]
