@@ -59,8 +59,8 @@ for s in flat:
 out.append("\n![strahl/Embree throughput ratio per scene and ray class](compare/results/ratio.png)\n")
 out.append("### Instanced scenes\n")
 out.append(
-    "The same run, on the two instanced scene files in `data/` (Embree: one `RTC_GEOMETRY_TYPE_INSTANCE` per placement). "
-    "The last column compares strahl instanced with strahl flattened on the same rays (forest only; the big world would need the memory below).\n"
+    "The same run, on the three instanced scene files in `data/` (Embree: one `RTC_GEOMETRY_TYPE_INSTANCE` per placement). "
+    "The last column compares strahl instanced with strahl flattened on the same rays (forest and trio; the big world would need the memory below).\n"
 )
 out.append("| scene | class | rays | hit/miss agree | prim agree | strahl single / packet / stream | Embree single / packet / stream | best vs best | single vs single | instanced vs flattened: hit/miss, same triangle, t ulps p50 / p99.9 |")
 out.append("|---|---|---:|---:|---:|---:|---:|---:|---:|---|")

@@ -69,7 +69,7 @@ pub fn data(dir: &Path) -> Vec<SceneSpec> {
         light: Some(Vec3::new(278.0, 540.0, 279.0)),
     }];
     v.push(sphereflake());
-    for name in ["forest", "big_world"] {
+    for name in ["forest", "big_world", "trio"] {
         let p = dir.join(format!("{name}.toml"));
         if p.exists() {
             v.push(scene_file(name, p));
