@@ -1,5 +1,5 @@
 //! Profiling aid: traces a scene file's primary rays (packets and single rays) on one thread.
-//! `cargo run --release --example instprof -- data/forest.toml [packet|packet16|api1|api1d|api1d2|api1par|single|diffuse|diffusep|shadow|shadow1|build|ibuild] [repeats] [flat|inst]`
+//! `cargo run --release --example instprof -- data/forest.toml [packet|packet16 (flat, or `inst`)|api1|api1d|api1d2|api1par|single|diffuse|diffusep|shadow|shadow1|build|ibuild] [repeats] [flat|inst]`
 //! (`shadow` and `diffusep` trace as packets, `shadow1` and `diffuse` one ray at a time; `ao` and `aop`
 //! ask whether the diffuse rays are occluded, one at a time and as packets; `diffuseo` and `aoo` trace
 //! the diffuse rays pre-sorted by direction octant in groups of 4,096, as consecutive packets; the `api1` modes call
@@ -111,19 +111,29 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         _ => (&primary, Coherence::Coherent),
     };
     if mode == "packet16" {
-        // The packet API on consecutive packets of 16 camera rays (no groups).
+        // The packet API on consecutive packets of 16 camera rays (no groups); flattened unless
+        // `inst` is given.
         let mut hp = strahl::HitPacket::default();
         let mut best = f64::INFINITY;
-        let flat = scene.flatten(&cfg)?;
+        let inst = args.iter().any(|a| a == "inst");
+        let flat = if inst { None } else { Some(scene.flatten(&cfg)?) };
         for _ in 0..repeats {
             let t = Instant::now();
             for k in (0..primary.len()).step_by(strahl::PACKET_WIDTH) {
-                flat.intersect_packet(&primary.packet(k, strahl::PACKET_WIDTH), &mut hp);
+                let p = primary.packet(k, strahl::PACKET_WIDTH);
+                match &flat {
+                    Some(f) => f.intersect_packet(&p, &mut hp),
+                    None => scene.intersect_packet(&p, &mut hp),
+                }
                 std::hint::black_box(&hp);
             }
             best = best.min(t.elapsed().as_secs_f64());
         }
-        println!("packet16 (flat): {:.2} Mrays/s (1 thread, best of {repeats})", primary.len() as f64 / best / 1e6);
+        println!(
+            "packet16 ({}): {:.2} Mrays/s (1 thread, best of {repeats})",
+            if inst { "instanced" } else { "flat" },
+            primary.len() as f64 / best / 1e6
+        );
         return Ok(());
     }
     if mode == "api1par" {
