@@ -254,6 +254,48 @@ pub fn flush_denormals_enabled() -> bool {
     }
 }
 
+/// Smallest lane of a four-lane vector, in registers (two `vpermilps` and `vminps`): a block
+/// test's nearest hit, which the halving through a store and reloads made wait on the way to the
+/// next node test (PERFORMANCE.md). NaN lanes must not occur.
+#[inline(always)]
+pub(crate) fn min4(t: f32x4) -> f32 {
+    #[cfg(all(target_arch = "x86_64", target_feature = "avx"))]
+    {
+        use core::arch::x86_64::{__m128, _mm_cvtss_f32, _mm_min_ps, _mm_permute_ps};
+        // SAFETY: `f32x4` and `__m128` are four `f32` lanes in 16 bytes, in lane order; the target
+        // feature of this block guarantees the instructions.
+        unsafe {
+            let x = core::mem::transmute::<f32x4, __m128>(t);
+            let m = _mm_min_ps(x, _mm_permute_ps::<0b01_00_11_10>(x));
+            let m = _mm_min_ps(m, _mm_permute_ps::<0b10_11_00_01>(m));
+            _mm_cvtss_f32(m)
+        }
+    }
+    #[cfg(not(all(target_arch = "x86_64", target_feature = "avx")))]
+    {
+        let a = t.to_array();
+        a[0].min(a[1]).min(a[2].min(a[3]))
+    }
+}
+
+/// Lane `l` of a four-lane vector, moved to the low lane in registers (`vpermilps`).
+#[inline(always)]
+pub(crate) fn lane4(x: f32x4, l: usize) -> f32 {
+    #[cfg(all(target_arch = "x86_64", target_feature = "avx"))]
+    {
+        use core::arch::x86_64::{__m128, _mm_cvtsi32_si128, _mm_cvtss_f32, _mm_permutevar_ps};
+        // SAFETY: as in `min4`; the index vector's low lane selects lane `l & 3`.
+        unsafe {
+            let v = core::mem::transmute::<f32x4, __m128>(x);
+            _mm_cvtss_f32(_mm_permutevar_ps(v, _mm_cvtsi32_si128((l & 3) as i32)))
+        }
+    }
+    #[cfg(not(all(target_arch = "x86_64", target_feature = "avx")))]
+    {
+        x.to_array()[l & 3]
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -322,6 +364,16 @@ mod tests {
         assert_eq!(hmin(Pf::splat(2.5)), 2.5);
         assert_eq!(hmax(Pf::new(base)), 7.5 * 3.25);
         assert_eq!(hmin(Pf::new(base)), -7.5 * 3.25);
+    }
+
+    #[test]
+    fn four_lane_minimum_and_lane_picks() {
+        let v = f32x4::new([3.0, -1.5, f32::INFINITY, 2.0]);
+        assert_eq!(min4(v), -1.5);
+        assert_eq!(min4(f32x4::new([f32::INFINITY, 7.0, 7.0, 5.0])), 5.0);
+        for l in 0..4 {
+            assert_eq!(lane4(v, l), v.to_array()[l]);
+        }
     }
 
     #[test]

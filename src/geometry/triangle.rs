@@ -177,14 +177,10 @@ pub(crate) fn nearest(valid: f32x4, t: f32x4, u: f32x4, v: f32x4) -> Option<(usi
     if bits == 0 {
         return None;
     }
-    let t = valid.select(t, f32x4::splat(f32::INFINITY)).to_array();
-    let mut best = bits.trailing_zeros() as usize;
-    for (lane, &tl) in t.iter().enumerate().skip(best + 1) {
-        if tl < t[best] {
-            best = lane;
-        }
-    }
-    Some((best, t[best], u.to_array()[best], v.to_array()[best]))
+    let t = valid.select(t, f32x4::splat(f32::INFINITY));
+    let tmin = min4(t);
+    let best = (t.simd_eq(f32x4::splat(tmin)).to_bitmask() & bits).trailing_zeros() as usize;
+    Some((best, tmin, lane4(u, best), lane4(v, best)))
 }
 
 /// `a × b` in Embree's form (`vec3.h`): `msub(a.y, b.z, a.z·b.y)` per component, fused where the
