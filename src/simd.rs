@@ -150,7 +150,7 @@ pub(crate) fn hmin(x: Pf) -> f32 {
     {
         use core::arch::x86_64::{__m512, _mm512_reduce_min_ps};
         // In registers (`vextractf64x4`, `vshufps`, `vminps`), where the halving below went
-        // through memory twice: 3–5% of camera packets (PERFORMANCE.md).
+        // through memory twice: 2–6% on packets (PERFORMANCE.md).
         // SAFETY: `Pf` is sixteen `f32` lanes in 64 bytes, in lane order, as `__m512` is; the
         // target feature of this block guarantees the instructions.
         unsafe { _mm512_reduce_min_ps(core::mem::transmute::<Pf, __m512>(x)) }

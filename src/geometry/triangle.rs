@@ -178,8 +178,12 @@ pub(crate) fn nearest(valid: f32x4, t: f32x4, u: f32x4, v: f32x4) -> Option<(usi
         return None;
     }
     let t = valid.select(t, f32x4::splat(f32::INFINITY));
+    // In registers (see `min4`). The kernels' valid lanes hold finite distances, so the minimum
+    // is one of theirs; the fallback only keeps the lane index inside the block.
     let tmin = min4(t);
-    let best = (t.simd_eq(f32x4::splat(tmin)).to_bitmask() & bits).trailing_zeros() as usize;
+    let at_min = t.simd_eq(f32x4::splat(tmin)).to_bitmask() & bits;
+    debug_assert!(at_min != 0, "a valid lane holds the minimum");
+    let best = if at_min != 0 { at_min } else { bits }.trailing_zeros() as usize;
     Some((best, tmin, lane4(u, best), lane4(v, best)))
 }
 
