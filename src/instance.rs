@@ -461,7 +461,7 @@ const OBJECT_PACKET_LANES: u32 = 8;
 /// entering lanes to walk the object as a packet. Rays leaving nearby points of a surface pass the
 /// same nodes around their origins, whatever their directions, so the per-lane tests of a packet
 /// walk serve many of them at once there; origins spread over much of the object share few nodes.
-/// One instance of a 433k-triangle sphereflake seen from close by: diffuse rays 3.6 → 4.4 Mrays/s
+/// One instance of a 433k-triangle sphereflake seen from close by: diffuse rays 3.7 → 4.4 Mrays/s
 /// (1 thread); the forest and the big world, whose packets spread over many instances: unchanged
 /// (PERFORMANCE.md).
 const OBJECT_PACKET_SPREAD: f32 = 16.0;
