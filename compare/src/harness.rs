@@ -9,7 +9,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 use strahl::{
     BuildConfig, Camera, Coherence, HitPacket, HitStream, INVALID_ID, InstancedScene, PACKET_WIDTH, Query, RayStream,
-    Scene, raygen,
+    Scene, TriangleMesh, raygen,
 };
 
 use crate::accuracy::{self, Accuracy};
@@ -226,12 +226,62 @@ pub struct BuildResult {
     pub embree_sah: Option<f64>,
     pub embree_high_sah: Option<f64>,
     pub embree_high_bytes_per_tri: Option<f64>,
+    /// Triangles strahl's tree leaves out (zero area, non-finite corners); Embree keeps them.
+    pub strahl_skipped_triangles: usize,
+    /// Where strahl left triangles out, the `embree_*` statistics above are from a second pair of
+    /// Embree builds over the triangles strahl keeps, and these (MEDIUM, HIGH) from its builds over
+    /// all the scene's triangles.
+    pub embree_all_triangles: Option<[EmbreeTreeStats; 2]>,
 }
 
-/// Embree's BVH statistics for a scene, as `[(sah, bytes per primitive)]` for MEDIUM then HIGH:
-/// Embree 3 has no API for them, but prints them on a `verbose=2` device, so the harness runs
-/// itself as a child (`--embree-stats-of`) and reads the `total : sah = …, #bytes/prim = …` lines.
-pub fn embree_stats(spec: &SceneSpec, threads: usize) -> Option<Vec<(f64, f64)>> {
+/// Embree's statistics of one build: SAH cost and bytes per primitive.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct EmbreeTreeStats {
+    pub sah: f64,
+    pub bytes_per_tri: f64,
+}
+
+/// Embree's statistics for a scene: MEDIUM and HIGH over the scene's triangles, and where strahl
+/// left triangles out, MEDIUM and HIGH again over the triangles strahl's tree holds.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EmbreeStats {
+    pub all: [EmbreeTreeStats; 2],
+    pub same_triangles: Option<[EmbreeTreeStats; 2]>,
+}
+
+/// The line `--embree-stats-of` prints before its builds over the triangles strahl keeps.
+pub const SAME_TRIANGLES_MARK: &str = "strahl: the same builds over the hittable triangles only";
+
+/// `meshes` without the triangles strahl's tree leaves out (`TriangleMesh::is_hittable`).
+pub fn hittable_meshes(meshes: &[TriangleMesh]) -> anyhow::Result<Vec<TriangleMesh>> {
+    meshes
+        .iter()
+        .map(|m| {
+            let indices = m.indices().iter().enumerate().filter(|(i, _)| m.is_hittable(*i)).map(|(_, t)| *t).collect();
+            Ok(TriangleMesh::new(m.name.clone(), m.positions().to_vec(), indices)?)
+        })
+        .collect()
+}
+
+impl BuildResult {
+    /// Takes Embree's figures over the same triangles as strahl's tree where they differ from the
+    /// scene's, keeping the scene's in the `embree_all_*` fields.
+    pub fn set_embree_stats(&mut self, stats: &EmbreeStats) {
+        let [medium, high] = stats.same_triangles.unwrap_or(stats.all);
+        self.embree_sah = Some(medium.sah);
+        self.embree_bytes_per_tri = Some(medium.bytes_per_tri);
+        self.embree_high_sah = Some(high.sah);
+        self.embree_high_bytes_per_tri = Some(high.bytes_per_tri);
+        if stats.same_triangles.is_some() {
+            self.embree_all_triangles = Some(stats.all);
+        }
+    }
+}
+
+/// Embree's BVH statistics for a scene. Embree 3 has no API for them, but prints them on a
+/// `verbose=2` device, so the harness runs itself as a child (`--embree-stats-of`) and reads the
+/// `total : sah = …, #bytes/prim = …` lines.
+pub fn embree_stats(spec: &SceneSpec, threads: usize) -> Option<EmbreeStats> {
     let arg = match &spec.source {
         crate::scenes::Source::Obj(p) => p.to_string_lossy().into_owned(),
         crate::scenes::Source::Sphereflake { levels, stacks, slices } => {
@@ -244,17 +294,29 @@ pub fn embree_stats(spec: &SceneSpec, threads: usize) -> Option<Vec<(f64, f64)>>
         .args(["--threads", &threads.to_string(), "--embree-stats-of", &arg])
         .output()
         .ok()?;
-    let text = String::from_utf8_lossy(&out.stdout);
-    let stats: Vec<(f64, f64)> = text
-        .lines()
-        .filter(|l| l.trim_start().starts_with("total") && l.contains("sah =") && l.contains("#bytes/prim"))
-        .filter_map(|l| {
-            let num =
-                |key: &str| l.split(key).nth(1)?.split_whitespace().next()?.trim_end_matches(',').parse::<f64>().ok();
-            Some((num("sah =")?, num("#bytes/prim =")?))
-        })
-        .collect();
-    (stats.len() >= 2).then_some(stats)
+    parse_embree_stats(&String::from_utf8_lossy(&out.stdout))
+}
+
+/// Reads [`EmbreeStats`] from the output of `--embree-stats-of`.
+fn parse_embree_stats(text: &str) -> Option<EmbreeStats> {
+    let (all, same) = match text.split_once(SAME_TRIANGLES_MARK) {
+        Some((a, s)) => (a, Some(s)),
+        None => (text, None),
+    };
+    let pair = |text: &str| -> Option<[EmbreeTreeStats; 2]> {
+        let stats: Vec<EmbreeTreeStats> = text
+            .lines()
+            .filter(|l| l.trim_start().starts_with("total") && l.contains("sah =") && l.contains("#bytes/prim"))
+            .filter_map(|l| {
+                let num = |key: &str| {
+                    l.split(key).nth(1)?.split_whitespace().next()?.trim_end_matches(',').parse::<f64>().ok()
+                };
+                Some(EmbreeTreeStats { sah: num("sah =")?, bytes_per_tri: num("#bytes/prim =")? })
+            })
+            .collect();
+        (stats.len() >= 2).then(|| [stats[0], stats[1]])
+    };
+    Some(EmbreeStats { all: pair(all)?, same_triangles: same.and_then(pair) })
 }
 
 pub struct SceneResult {
@@ -391,6 +453,8 @@ pub fn run_scene(
         embree_sah: None,
         embree_high_sah: None,
         embree_high_bytes_per_tri: None,
+        strahl_skipped_triangles: st.skipped_triangles,
+        embree_all_triangles: None,
     };
     let ((eye, at), light) = spec.view_and_light(scene.bounds());
     let camera = Camera::look_at(eye, at, Vec3::Y, 60.0);
@@ -503,6 +567,8 @@ fn run_instanced(
         embree_sah: None,
         embree_high_sah: None,
         embree_high_bytes_per_tri: None,
+        strahl_skipped_triangles: object_stats.iter().map(|s| s.skipped_triangles).sum(),
+        embree_all_triangles: None,
     };
     let bounds = scene.bounds();
     let camera = match &file.camera {
@@ -1013,4 +1079,41 @@ pub fn translation_sweep(
         }
     }
     Ok(rows)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn embree_stats_split_at_the_same_triangles_mark() {
+        let line = |sah: f64, b: f64| {
+            format!(
+                "  total            : sah =  {sah:.3} (100.00%), #bytes =   1.00 MB (100.00%), #bytes/prim =  {b:.2}\n"
+            )
+        };
+        let noise = "  total : used =  22.001 MB, free =   0.122 MB, #bytes/prim =  66.81\n";
+        let all = format!("{}{noise}{}", line(11.101, 64.19), line(11.133, 66.68));
+        let s = parse_embree_stats(&all).unwrap();
+        assert_eq!(s.all[0], EmbreeTreeStats { sah: 11.101, bytes_per_tri: 64.19 });
+        assert_eq!(s.all[1], EmbreeTreeStats { sah: 11.133, bytes_per_tri: 66.68 });
+        assert_eq!(s.same_triangles, None);
+        let both = format!("{all}{SAME_TRIANGLES_MARK}\n{}{}", line(11.5, 63.27), line(11.499, 66.24));
+        let s = parse_embree_stats(&both).unwrap();
+        assert_eq!(s.all[0].sah, 11.101);
+        assert_eq!(s.same_triangles.unwrap()[0], EmbreeTreeStats { sah: 11.5, bytes_per_tri: 63.27 });
+        let mut b = BuildResult::default();
+        b.set_embree_stats(&s);
+        assert_eq!((b.embree_sah, b.embree_high_sah), (Some(11.5), Some(11.499)));
+        assert_eq!(b.embree_all_triangles.unwrap()[0].sah, 11.101);
+        assert!(parse_embree_stats(&line(1.0, 2.0)).is_none(), "one build is not a MEDIUM and HIGH pair");
+    }
+
+    #[test]
+    fn hittable_meshes_drop_exactly_the_unhittable_triangles() {
+        let p = vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::new(2.0, 0.0, 0.0)];
+        let m = TriangleMesh::new("m", p, vec![[0, 1, 2], [0, 1, 3], [2, 1, 0]]).unwrap();
+        let h = hittable_meshes(&[m]).unwrap();
+        assert_eq!(h[0].indices(), &[[0, 1, 2], [2, 1, 0]]);
+    }
 }
