@@ -8,7 +8,7 @@
 //! largest surface area until it has `WIDTH` (8) children; then recurse, in parallel with rayon
 //! above [`BuildConfig::parallel_threshold`] primitives.
 
-use glam::{Vec3A, Vec4};
+use glam::{UVec4, Vec3A, Vec4};
 use rayon::prelude::*;
 
 use super::node::{MAX_LEAF_BLOCKS, WIDTH};
@@ -231,13 +231,14 @@ pub(super) fn blocks(n: usize) -> f32 {
 #[derive(Clone)]
 struct Bins {
     boxes: [[[Aabb; 3]; MAX_BINS]; 2],
-    counts: [[[u32; 3]; MAX_BINS]; 2],
+    /// Per bin, the count on each axis (the fourth lane stays 0, for vector loads in `sweep`).
+    counts: [[[u32; 4]; MAX_BINS]; 2],
     n: usize,
 }
 
 impl Bins {
     fn new(n: usize) -> Self {
-        Self { boxes: [[[Aabb::EMPTY; 3]; MAX_BINS]; 2], counts: [[[0; 3]; MAX_BINS]; 2], n }
+        Self { boxes: [[[Aabb::EMPTY; 3]; MAX_BINS]; 2], counts: [[[0; 4]; MAX_BINS]; 2], n }
     }
 
     fn reset(&mut self, n: usize) {
@@ -245,7 +246,7 @@ impl Bins {
         for c in 0..2 {
             for i in 0..n {
                 self.boxes[c][i] = [Aabb::EMPTY; 3];
-                self.counts[c][i] = [0; 3];
+                self.counts[c][i] = [0; 4];
             }
         }
     }
@@ -391,21 +392,8 @@ pub(super) fn find_split(prims: &[PrimRef], cb: &Aabb, cfg: &BuildConfig) -> Opt
     let ext = cb.hi - cb.lo;
     // Slightly less than nb / extent so that the largest centroid lands in the last bin.
     let scale = Vec3A::select(ext.cmpgt(Vec3A::ZERO), Vec3A::splat(nb as f32 * 0.99999) / ext, Vec3A::ZERO);
-    // Bins live on this frame and are filled in place (a 3 KB value is not worth moving).
     if prims.len() >= 4 * BIN_CHUNK {
-        let bins = prims
-            .par_chunks(BIN_CHUNK)
-            .fold(
-                || Bins::new(nb),
-                |mut b, c| {
-                    bin_into(&mut b, c, cb.lo, scale);
-                    b
-                },
-            )
-            .reduce(|| Bins::new(nb), Bins::merge);
-        let mut bins = bins;
-        bins.settle();
-        return sweep(&bins, cb, scale);
+        return find_split_parallel(prims, cb, nb, scale);
     }
     // Small and medium sets bin into this thread's scratch bins, clearing only the bins in use:
     // clearing all 32 on every call cost about a quarter of a 6k-triangle build.
@@ -416,55 +404,96 @@ pub(super) fn find_split(prims: &[PrimRef], cb: &Aabb, cfg: &BuildConfig) -> Opt
             b.settle();
             sweep(&b, cb, scale)
         }
-        Err(_) => {
-            let mut b = Bins::new(nb);
-            bin_into(&mut b, prims, cb.lo, scale);
-            b.settle();
-            sweep(&b, cb, scale)
-        }
+        Err(_) => find_split_fresh(prims, cb, nb, scale),
     })
+}
+
+/// [`find_split`] for large sets: chunks binned in parallel, each fold into its own bins. Out of
+/// line, so that the common path's frame does not hold these 6 KB values.
+#[inline(never)]
+fn find_split_parallel(prims: &[PrimRef], cb: &Aabb, nb: usize, scale: Vec3A) -> Option<Split> {
+    let mut bins = prims
+        .par_chunks(BIN_CHUNK)
+        .fold(
+            || Bins::new(nb),
+            |mut b, c| {
+                bin_into(&mut b, c, cb.lo, scale);
+                b
+            },
+        )
+        .reduce(|| Bins::new(nb), Bins::merge);
+    bins.settle();
+    sweep(&bins, cb, scale)
+}
+
+/// [`find_split`] with fresh bins, should this thread's scratch bins be in use (never in the
+/// current builder: binning does not re-enter it).
+#[cold]
+#[inline(never)]
+fn find_split_fresh(prims: &[PrimRef], cb: &Aabb, nb: usize, scale: Vec3A) -> Option<Split> {
+    let mut b = Bins::new(nb);
+    bin_into(&mut b, prims, cb.lo, scale);
+    b.settle();
+    sweep(&b, cb, scale)
 }
 
 thread_local! {
     static SCRATCH: std::cell::RefCell<Bins> = std::cell::RefCell::new(Bins::new(MAX_BINS));
 }
 
-/// The split of least SAH cost over filled and settled bins.
+/// The split of least SAH cost over filled and settled bins: all three axes at once, one per
+/// vector lane.
 fn sweep(bins: &Bins, cb: &Aabb, scale: Vec3A) -> Option<Split> {
     let nb = bins.n;
-    let mut best: Option<Split> = None;
     // Per bin i: the cost of the right side `A · blocks` of bins >= i (infinite if empty).
-    let mut right_cost = [0.0f32; MAX_BINS];
+    let mut right_cost = [Vec4::ZERO; MAX_BINS];
+    let mut acc = [Aabb::EMPTY; 3];
+    let mut cnt = UVec4::ZERO;
+    for i in (1..nb).rev() {
+        for (a, b) in acc.iter_mut().zip(&bins.boxes[0][i]) {
+            a.grow(b);
+        }
+        cnt += UVec4::from_array(bins.counts[0][i]);
+        right_cost[i] = side_costs(&acc, cnt);
+    }
+    // Sweep from the left, evaluating the split before bin i; no branch on the data, the first
+    // of equal costs wins.
+    let mut acc = [Aabb::EMPTY; 3];
+    let mut cnt = UVec4::ZERO;
+    // Positions as floats (exact below 2^24) so that one mask selects both.
+    let (mut best_cost, mut best_pos) = (Vec4::INFINITY, Vec4::ZERO);
+    for i in 1..nb {
+        for (a, b) in acc.iter_mut().zip(&bins.boxes[0][i - 1]) {
+            a.grow(b);
+        }
+        cnt += UVec4::from_array(bins.counts[0][i - 1]);
+        let cost = side_costs(&acc, cnt) + right_cost[i];
+        let better = cost.cmplt(best_cost);
+        best_cost = Vec4::select(better, cost, best_cost);
+        best_pos = Vec4::select(better, Vec4::splat(i as f32), best_pos);
+    }
+    // The axis of least cost; of equal costs the first.
+    let mut best: Option<Split> = None;
     for axis in 0..3 {
-        if scale[axis] == 0.0 {
-            continue;
-        }
-        let mut acc = Aabb::EMPTY;
-        let mut cnt = 0usize;
-        for i in (1..nb).rev() {
-            acc.grow(&bins.boxes[0][i][axis]);
-            cnt += bins.counts[0][i][axis] as usize;
-            right_cost[i] = if cnt == 0 { f32::INFINITY } else { acc.half_area() * blocks(cnt) };
-        }
-        // Sweep from the left, evaluating the split before bin i; no branch on the data (the
-        // comparisons become selects), the first of equal costs wins.
-        let mut acc = Aabb::EMPTY;
-        let mut cnt = 0usize;
-        let (mut best_cost, mut best_pos) = (best.map_or(f32::INFINITY, |b| b.cost), 0usize);
-        for i in 1..nb {
-            acc.grow(&bins.boxes[0][i - 1][axis]);
-            cnt += bins.counts[0][i - 1][axis] as usize;
-            let left = if cnt == 0 { f32::INFINITY } else { acc.half_area() * blocks(cnt) };
-            let cost = left + right_cost[i];
-            let better = cost < best_cost;
-            best_cost = if better { cost } else { best_cost };
-            best_pos = if better { i } else { best_pos };
-        }
-        if best_pos != 0 {
-            best = Some(Split { axis, pos: best_pos, cost: best_cost, scale: scale[axis], offset: cb.lo[axis] });
+        let (cost, pos) = (best_cost[axis], best_pos[axis] as usize);
+        if scale[axis] != 0.0 && pos != 0 && best.is_none_or(|b| cost < b.cost) {
+            best = Some(Split { axis, pos, cost, scale: scale[axis], offset: cb.lo[axis] });
         }
     }
     best
+}
+
+/// `half area · blocks` of the three axes' boxes `acc` holding `cnt` references, one per lane
+/// (infinite where empty), in the same operations as [`Aabb::half_area`] and [`blocks`].
+#[inline(always)]
+fn side_costs(acc: &[Aabb; 3], cnt: UVec4) -> Vec4 {
+    let d = acc.map(|b| (b.hi - b.lo).max(Vec3A::ZERO));
+    let x = Vec4::new(d[0].x, d[1].x, d[2].x, 0.0);
+    let y = Vec4::new(d[0].y, d[1].y, d[2].y, 0.0);
+    let z = Vec4::new(d[0].z, d[1].z, d[2].z, 0.0);
+    let area = x * y + y * z + z * x;
+    let blocks = ((cnt + UVec4::splat(BLOCK as u32 - 1)) >> UVec4::splat(BLOCK.trailing_zeros())).as_vec4();
+    Vec4::select(blocks.cmpeq(Vec4::ZERO), Vec4::INFINITY, area * blocks)
 }
 
 /// Whether a doubled centroid `c` falls on the left of `split`.
@@ -717,6 +746,61 @@ mod tests {
                 bin_runs(&mut runs, &prims[..len], set.centroids.lo, scale, Vec3A::splat((nb - 1) as f32));
                 assert!(same_bins(&runs, &want), "bin_runs, {len} references, shuffled: {shuffle}");
             }
+        }
+    }
+
+    #[test]
+    fn sweep_finds_the_cheapest_split_over_all_axes() {
+        // Random boxes; the vector sweep against one split at a time, scalar.
+        let mut s = 0x2545_f491_4f6c_dd1du64;
+        let mut rnd = || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 40) as f32 / (1u64 << 24) as f32
+        };
+        for n in [2, 5, 40, 300] {
+            let prims: Vec<PrimRef> = (0..n)
+                .map(|i| {
+                    let lo = Vec3A::new(rnd(), rnd() * 0.5, rnd() * 2.0);
+                    PrimRef::new(Aabb { lo, hi: lo + Vec3A::new(rnd(), rnd(), rnd()) * 0.1 }, i)
+                })
+                .collect();
+            let set = set_of(&prims, 0);
+            let nb = 16;
+            let ext = set.centroids.hi - set.centroids.lo;
+            let scale = Vec3A::splat(nb as f32 * 0.99999) / ext;
+            let mut bins = Bins::new(nb);
+            bin_into(&mut bins, &prims, set.centroids.lo, scale);
+            bins.settle();
+            let got = sweep(&bins, &set.centroids, scale).unwrap();
+            let mut want: Option<(f32, usize, usize)> = None;
+            for axis in 0..3 {
+                for pos in 1..nb {
+                    let (mut l, mut r) = (Aabb::EMPTY, Aabb::EMPTY);
+                    let (mut nl, mut nr) = (0, 0);
+                    for p in &prims {
+                        let bin = ((p.center2() - set.centroids.lo) * scale)[axis] as usize;
+                        if bin < pos {
+                            l.grow(&p.bounds());
+                            nl += 1;
+                        } else {
+                            r.grow(&p.bounds());
+                            nr += 1;
+                        }
+                    }
+                    if nl == 0 || nr == 0 {
+                        continue;
+                    }
+                    let cost = l.half_area() * blocks(nl) + r.half_area() * blocks(nr);
+                    if want.is_none_or(|w| cost < w.0) {
+                        want = Some((cost, axis, pos));
+                    }
+                }
+            }
+            let (cost, axis, pos) = want.unwrap();
+            assert_eq!((got.axis, got.pos), (axis, pos), "{n} boxes");
+            assert_eq!(got.cost, cost);
         }
     }
 
