@@ -230,9 +230,9 @@ pub(super) fn blocks(n: usize) -> f32 {
 /// references (see [`bin_into`]); [`settle`](Bins::settle) folds the second into the first.
 #[derive(Clone)]
 struct Bins {
-    boxes: [[[Aabb; 3]; MAX_BINS]; 2],
+    boxes: [BinBoxes; 2],
     /// Per bin, the count on each axis (the fourth lane stays 0, for vector loads in `sweep`).
-    counts: [[[u32; 4]; MAX_BINS]; 2],
+    counts: [BinCounts; 2],
     n: usize,
 }
 
@@ -251,39 +251,33 @@ impl Bins {
         }
     }
 
-    /// Grows copy `to` by copy `from` of `o`.
-    fn add(&mut self, to: usize, o: &Bins, from: usize) {
-        for (a, b) in self.boxes[to].iter_mut().zip(&o.boxes[from]).take(self.n) {
-            for k in 0..3 {
-                a[k].grow(&b[k]);
-            }
-        }
-        for (a, b) in self.counts[to].iter_mut().zip(&o.counts[from]).take(self.n) {
-            for k in 0..3 {
-                a[k] += b[k];
-            }
-        }
-    }
-
     fn merge(mut self, o: Bins) -> Bins {
-        self.add(0, &o, 0);
-        self.add(1, &o, 1);
+        for c in 0..2 {
+            fold(self.n, (&mut self.boxes[c], &mut self.counts[c]), (&o.boxes[c], &o.counts[c]));
+        }
         self
     }
 
     /// Folds the second copy into the first, which then holds the whole set.
     fn settle(&mut self) {
-        let [first, second] = &mut self.boxes;
-        for (a, b) in first.iter_mut().zip(second.iter()).take(self.n) {
-            for k in 0..3 {
-                a[k].grow(&b[k]);
-            }
+        let ([first, second], [first_n, second_n]) = (&mut self.boxes, &mut self.counts);
+        fold(self.n, (first, first_n), (second, second_n));
+    }
+}
+
+type BinBoxes = [[Aabb; 3]; MAX_BINS];
+type BinCounts = [[u32; 4]; MAX_BINS];
+
+/// Grows the first `n` bins of `to` by those of `from`.
+fn fold(n: usize, to: (&mut BinBoxes, &mut BinCounts), from: (&BinBoxes, &BinCounts)) {
+    for (a, b) in to.0.iter_mut().zip(from.0).take(n) {
+        for k in 0..3 {
+            a[k].grow(&b[k]);
         }
-        let [first, second] = &mut self.counts;
-        for (a, b) in first.iter_mut().zip(second.iter()).take(self.n) {
-            for k in 0..3 {
-                a[k] += b[k];
-            }
+    }
+    for (a, b) in to.1.iter_mut().zip(from.1).take(n) {
+        for k in 0..3 {
+            a[k] += b[k];
         }
     }
 }
