@@ -1,5 +1,5 @@
 //! Profiling aid: traces a scene file's primary rays (packets and single rays) on one thread.
-//! `cargo run --release --example instprof -- data/forest.toml [packet|packet16 (flat, or `inst`)|api1|api1d|api1d2|api1par|single|diffuse|diffusep|shadow|shadow1|build|ibuild] [repeats] [flat|inst]`
+//! `cargo run --release --example instprof -- data/forest.toml [packet|packet16 (flat, or `inst`)|api1|api1d|api1d2|api1par|single|diffuse|diffusep|shadow|shadow1|build|ibuild|ctx] [repeats] [flat|inst]`
 //! (`shadow` and `diffusep` trace as packets, `shadow1` and `diffuse` one ray at a time; `ao` and `aop`
 //! ask whether the diffuse rays are occluded, one at a time and as packets; `diffuseo` and `aoo` trace
 //! the diffuse rays pre-sorted by direction octant in groups of 4,096, as consecutive packets; the `api1` modes call
@@ -58,6 +58,27 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             st.triangles,
             st.bytes_per_triangle
         );
+        return Ok(());
+    }
+    if mode == "ctx" {
+        // The first object's build called directly, inside a one-element `par_iter` map, and as
+        // the two-level build's objects (`build_ms` against `objects_build_ms`), best of `repeats`.
+        use rayon::prelude::*;
+        let objects = file.load_objects()?;
+        let meshes = objects[0].clone();
+        let (mut a, mut b, mut c) = (f64::INFINITY, f64::INFINITY, f64::INFINITY);
+        for _ in 0..repeats {
+            let s = strahl::Scene::build(meshes.clone(), &cfg)?;
+            a = a.min(s.stats().build_ms);
+            drop(s);
+            let v: Vec<strahl::Scene> =
+                vec![meshes.clone()].into_par_iter().map(|m| strahl::Scene::build(m, &cfg).unwrap()).collect();
+            b = b.min(v[0].stats().build_ms);
+            drop(v);
+            let s = strahl::InstancedScene::build(vec![meshes.clone()], file.instances.clone(), &cfg)?;
+            c = c.min(s.stats().objects_build_ms);
+        }
+        println!("ctx: direct {a:.2}, in par_iter {b:.2}, instanced {c:.2}");
         return Ok(());
     }
     if mode == "ibuild" {
