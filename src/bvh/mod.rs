@@ -276,8 +276,9 @@ type LayoutJob<'a> = (Aabb, BuildNode, usize, &'a mut [Node], &'a mut [(usize, u
 
 /// Lays `node` out depth-first: itself in `nodes[0]` (index `base` of the whole node array), its
 /// subtree in the rest of `nodes`, its leaves' primitive ranges in order in `leaves`, their blocks
-/// numbered from `block`. Returns the child reference naming it. The slices have exactly the
-/// subtree's size, so that large subtrees are laid out in parallel (if `parallel`).
+/// numbered from `block`. Returns the child reference naming it and the cost of the nodes below
+/// it; frees the subtree as it goes. The slices have exactly the subtree's size, so that large
+/// subtrees are laid out in parallel (if `parallel`).
 fn layout(
     node: BuildNode,
     base: usize,
