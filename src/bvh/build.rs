@@ -652,6 +652,7 @@ fn recurse_at(set: Set, prims: &mut [PrimRef], base: usize, cfg: &BuildConfig, d
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::raygen::Pcg32;
 
     fn prims_on_line(n: usize) -> Vec<PrimRef> {
         (0..n)
@@ -718,12 +719,9 @@ mod tests {
         let mut prims = prims_on_line(3 * RUN_MIN + 3);
         for shuffle in [false, true] {
             if shuffle {
-                let mut s = 0x9e37_79b9_7f4a_7c15u64;
+                let mut rng = Pcg32::new(7, 0);
                 for i in (1..prims.len()).rev() {
-                    s ^= s << 13;
-                    s ^= s >> 7;
-                    s ^= s << 17;
-                    prims.swap(i, (s % (i as u64 + 1)) as usize);
+                    prims.swap(i, rng.next_u32() as usize % (i + 1));
                 }
             }
             for len in [1, 2, 7, 100, RUN_MIN - 1, RUN_MIN, prims.len()] {
@@ -746,13 +744,8 @@ mod tests {
     #[test]
     fn sweep_finds_the_cheapest_split_over_all_axes() {
         // Random boxes; the vector sweep against one split at a time, scalar.
-        let mut s = 0x2545_f491_4f6c_dd1du64;
-        let mut rnd = || {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            (s >> 40) as f32 / (1u64 << 24) as f32
-        };
+        let mut rng = Pcg32::new(11, 0);
+        let mut rnd = || rng.next_f32();
         for n in [2, 5, 40, 300] {
             let prims: Vec<PrimRef> = (0..n)
                 .map(|i| {
