@@ -117,6 +117,15 @@ impl InstancedScene {
         instances: Vec<Instance>,
         config: &BuildConfig,
     ) -> Result<Self> {
+        crate::bvh::on_pool(|| Self::build_in_pool(objects, instances, config))
+    }
+
+    /// [`build`](Self::build) on a thread of the pool.
+    fn build_in_pool(
+        objects: Vec<Vec<crate::geometry::TriangleMesh>>,
+        instances: Vec<Instance>,
+        config: &BuildConfig,
+    ) -> Result<Self> {
         let start = Instant::now();
         // Objects side by side: most are too small to keep two threads busy on their own.
         let objects =
