@@ -19,8 +19,8 @@ use std::time::Instant;
 use glam::{Affine3A, Mat3A, Vec3, Vec3A};
 use rayon::prelude::*;
 
-use crate::bvh::build::{self, Aabb, BuildNode, PrimRef};
-use crate::bvh::node::{EMPTY, MAX_BLOCK_INDEX, Node, leaf_blocks, leaf_ref};
+use crate::bvh::build::{self, Aabb, PrimRef};
+use crate::bvh::node::{EMPTY, MAX_BLOCK_INDEX, Node, leaf_blocks};
 use crate::bvh::traverse::{
     BoxRay, LaneSlabs, LeafHit, PacketBoxes, PacketHits, SlabTerms, Stack, dispatch, each_lane_alone, walk_packet,
     walk1, with_stack,
@@ -178,9 +178,17 @@ impl InstancedScene {
         };
         let tree = build::build(&mut prims, &cfg);
         let mut nodes = Vec::new();
-        let (root, bounds) = match &tree {
+        let (root, bounds) = match tree {
             None => (EMPTY, None),
-            Some((b, node)) => (layout(node, &mut nodes), Some((Vec3::from(b.lo), Vec3::from(b.hi)))),
+            Some(t) => {
+                // One instance per leaf and one "block" per leaf, numbered in leaf order: the leaf
+                // references name entries of the reordered instance list.
+                nodes.resize(t.chunk.size.nodes, Node::default());
+                let mut leaves = vec![(0, 0); t.chunk.size.leaves];
+                crate::bvh::place(t.chunk, &mut nodes, &mut leaves, 0, 0);
+                debug_assert!(leaves.iter().enumerate().all(|(i, &l)| l == (i, 1)));
+                (t.root, Some((Vec3::from(t.bounds.lo), Vec3::from(t.bounds.hi))))
+            }
         };
         // Leaf entries in the builder's order, so neighbouring leaves sit side by side in memory.
         let placed: Vec<Placed> = prims
@@ -574,22 +582,6 @@ fn world_box(m: &Affine3A, lo: Vec3, hi: Vec3) -> Aabb {
         b.grow_point(Vec3A::from(m.transform_point3(p)));
     }
     b
-}
-
-/// Appends `node` depth-first; leaves reference `count` entries of the reordered instance list.
-fn layout(node: &BuildNode, nodes: &mut Vec<Node>) -> u32 {
-    match node {
-        BuildNode::Leaf { start, count } => leaf_ref(*start, *count),
-        BuildNode::Inner { children, .. } => {
-            let index = nodes.len();
-            nodes.push(Node::default());
-            for (i, (b, child)) in children.iter().enumerate() {
-                let r = layout(child, nodes);
-                nodes[index].set(i, r, b.lo.into(), b.hi.into());
-            }
-            index as u32
-        }
-    }
 }
 
 impl Query for InstancedScene {

@@ -11,7 +11,7 @@
 use glam::{UVec4, Vec3A, Vec4};
 use rayon::prelude::*;
 
-use super::node::{MAX_LEAF_BLOCKS, WIDTH};
+use super::node::{EMPTY, MAX_LEAF_BLOCKS, Node, WIDTH, is_leaf, leaf_blocks, leaf_ref};
 use super::traverse::BoxTest;
 use crate::geometry::triangle::{BLOCK, TriangleTest};
 use crate::simd::trunc4;
@@ -161,18 +161,30 @@ impl PrimRef {
     }
 }
 
-/// The builder's output before flattening.
-pub(crate) enum BuildNode {
-    /// Primitives `start..start + count` of the reordered reference array.
-    Leaf { start: usize, count: usize },
-    Inner {
-        children: Vec<(Aabb, BuildNode)>,
-        /// The subtree's sizes, so that it can be flattened in parallel into disjoint slices.
-        size: Size,
-    },
+/// The builder's output: a subtree already in the final node layout (depth-first preorder), so
+/// that nothing but a copy remains to be done once all subtrees are built. Subtrees built in
+/// parallel are chunks of their own, placed after their parent's chunk in order.
+///
+/// Child references in `nodes` are relative to the chunk: an inner child's node index from the
+/// chunk's first node, a leaf's first block from the chunk's first block ([`rebase`] makes them
+/// absolute).
+#[derive(Debug, Default)]
+pub(crate) struct Chunk {
+    /// Inner nodes, depth-first preorder.
+    pub nodes: Vec<Node>,
+    /// Primitive ranges `(start, count)` of the chunk's own leaves, in order: each leaf's blocks
+    /// follow the previous leaf's.
+    pub leaves: Vec<(usize, usize)>,
+    /// Blocks of the chunk's own leaves.
+    pub own_blocks: usize,
+    /// Subtrees built in parallel (a chunk with kids holds one node, their parent), laid out
+    /// after the chunk's own nodes and blocks, in order.
+    pub kids: Vec<Chunk>,
+    /// Totals of the chunk and its kids.
+    pub size: Size,
 }
 
-/// Sizes of a subtree: inner nodes (itself included), leaves, and triangle blocks of its leaves.
+/// Sizes of a subtree: inner nodes, leaves, and triangle blocks of its leaves.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub(crate) struct Size {
     pub nodes: usize,
@@ -180,24 +192,83 @@ pub(crate) struct Size {
     pub blocks: usize,
 }
 
-impl BuildNode {
-    /// An inner node over `children`, its size summed from theirs.
-    pub fn inner(children: Vec<(Aabb, BuildNode)>) -> Self {
-        let mut size = Size { nodes: 1, leaves: 0, blocks: 0 };
-        for (_, c) in &children {
-            let s = c.size();
-            size.nodes += s.nodes;
-            size.leaves += s.leaves;
-            size.blocks += s.blocks;
-        }
-        BuildNode::Inner { children, size }
+impl std::ops::Add for Size {
+    type Output = Size;
+    fn add(self, o: Size) -> Size {
+        Size { nodes: self.nodes + o.nodes, leaves: self.leaves + o.leaves, blocks: self.blocks + o.blocks }
+    }
+}
+
+/// A subtree's share of the SAH cost as Embree's `BVHNStatistics` counts it (the half area of
+/// every inner node, the half area of every leaf times its blocks; not yet relative to the
+/// root's), and its depth in wide levels.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct SubtreeCost {
+    pub sah: f64,
+    pub depth: usize,
+}
+
+impl SubtreeCost {
+    /// Adds a child with box `b`, reference `r` and the cost `below` it.
+    pub fn add_child(&mut self, b: &Aabb, r: u32, below: SubtreeCost) {
+        self.sah += node_cost(b, r) + below.sah;
+        self.depth = self.depth.max(below.depth + 1);
+    }
+}
+
+/// The cost of the node that `r` names itself, whose box is `b`.
+pub(crate) fn node_cost(b: &Aabb, r: u32) -> f64 {
+    let area = b.half_area() as f64;
+    if is_leaf(r) { area * leaf_blocks(r).1 as f64 } else { area }
+}
+
+/// `r`, relative to a chunk, made relative to a place `nodes` nodes and `blocks` blocks further.
+#[inline]
+pub(crate) fn rebase(r: u32, nodes: usize, blocks: usize) -> u32 {
+    if r == EMPTY {
+        r
+    } else if is_leaf(r) {
+        // The block index is the low field; the total stays below MAX_BLOCK_INDEX (checked
+        // before the chunks are placed).
+        r + blocks as u32
+    } else {
+        r + nodes as u32
+    }
+}
+
+impl Chunk {
+    /// Appends a leaf over primitives `start..start + count`; returns its reference.
+    pub fn leaf(&mut self, start: usize, count: usize) -> u32 {
+        let blocks = count.div_ceil(BLOCK);
+        let r = leaf_ref(self.own_blocks, blocks);
+        self.leaves.push((start, count));
+        self.own_blocks += blocks;
+        self.size.leaves += 1;
+        self.size.blocks += blocks;
+        r
     }
 
-    pub fn size(&self) -> Size {
-        match self {
-            BuildNode::Leaf { count, .. } => Size { nodes: 0, leaves: 1, blocks: count.div_ceil(BLOCK) },
-            BuildNode::Inner { size, .. } => *size,
-        }
+    /// Reserves the slot of an inner node whose subtree follows; [`close`](Self::close) fills it.
+    pub fn open(&mut self) -> usize {
+        self.nodes.push(Node::default());
+        self.size.nodes += 1;
+        self.nodes.len() - 1
+    }
+
+    /// Fills slot `index` with `node`; returns its reference.
+    pub fn close(&mut self, index: usize, node: Node) -> u32 {
+        self.nodes[index] = node;
+        index as u32
+    }
+
+    /// Attaches `kid`, built in parallel, after the kids already attached; returns `r` (relative
+    /// to `kid`) relative to this chunk.
+    pub fn attach(&mut self, kid: Chunk, r: u32) -> u32 {
+        let before = self.kids.iter().fold(Size::default(), |a, k| a + k.size);
+        let r = rebase(r, self.nodes.len() + before.nodes, self.own_blocks + before.blocks);
+        self.size = self.size + kid.size;
+        self.kids.push(kid);
+        r
     }
 }
 
@@ -656,20 +727,33 @@ fn split_set(set: &Set, prims: &mut [PrimRef], split: Option<Split>) -> (Set, Se
 }
 
 /// Builds the tree over `prims` (reordering them) and returns it with its root bounds.
-pub(crate) fn build(prims: &mut [PrimRef], cfg: &BuildConfig) -> Option<(Aabb, BuildNode)> {
+pub(crate) fn build(prims: &mut [PrimRef], cfg: &BuildConfig) -> Option<Built> {
     if prims.is_empty() {
         return None;
     }
     Some(build_presplit(prims, cfg, PRESPLIT_MIN))
 }
 
+/// A built tree: its root bounds, its nodes in chunks, the root's reference (absolute: the top
+/// chunk comes first) and the cost of the whole tree (the root's own included).
+#[derive(Debug)]
+pub(crate) struct Built {
+    pub bounds: Aabb,
+    pub chunk: Chunk,
+    pub root: u32,
+    pub cost: SubtreeCost,
+}
+
 /// [`build`] of a non-empty set, splitting sets of `presplit_min` or more ahead.
-fn build_presplit(prims: &mut [PrimRef], cfg: &BuildConfig, presplit_min: usize) -> (Aabb, BuildNode) {
+fn build_presplit(prims: &mut [PrimRef], cfg: &BuildConfig, presplit_min: usize) -> Built {
     let cfg = cfg.clamped();
     let root = set_of(prims, 0);
     let min = presplit_min.max(cfg.max_leaf + 1);
     let pre = presplit(root, prims, 0, &cfg, min, 0);
-    (root.bounds, recurse_at(root, prims, 0, &cfg, 0, pre))
+    let mut chunk = Chunk::default();
+    let (r, below) = recurse_at(root, prims, 0, &cfg, 0, pre, &mut chunk);
+    let cost = SubtreeCost { sah: node_cost(&root.bounds, r) + below.sah, depth: below.depth };
+    Built { bounds: root.bounds, chunk, root: r, cost }
 }
 
 /// Sets of at least this many references are split ahead of the wide nodes ([`presplit`]).
@@ -720,9 +804,10 @@ fn presplit(
 /// presplit if it has one.
 type Slot = (Set, Option<Option<Split>>, Option<Box<Presplit>>);
 
-/// Builds the subtree of `set`. `prims` is the slice that `set` indexes into, starting at index
-/// `base` of the whole reference array; ranges stored in the result are absolute. `pre` is the
-/// set's [`presplit`], if it has one.
+/// Builds the subtree of `set` into `out`; returns the reference naming it (relative to `out`)
+/// and the cost below it. `prims` is the slice that `set` indexes into, starting at index `base`
+/// of the whole reference array; leaf ranges are absolute. `pre` is the set's [`presplit`], if
+/// it has one.
 fn recurse_at(
     set: Set,
     prims: &mut [PrimRef],
@@ -730,9 +815,10 @@ fn recurse_at(
     cfg: &BuildConfig,
     depth: usize,
     pre: Option<Box<Presplit>>,
-) -> BuildNode {
+    out: &mut Chunk,
+) -> (u32, SubtreeCost) {
     let local = Set { start: set.start - base, ..set };
-    let make_leaf = || BuildNode::Leaf { start: set.start, count: set.count };
+    let mut make_leaf = || (out.leaf(set.start, set.count), SubtreeCost::default());
     if set.count <= cfg.min_leaf {
         return make_leaf();
     }
@@ -794,26 +880,55 @@ fn recurse_at(
     }
     let order = &mut order[..n];
     order.sort_unstable_by_key(|&k| children[k].0.start);
-    let mut pieces = Vec::with_capacity(n);
+    let mut node = Node::default();
+    let mut cost = SubtreeCost::default();
+    if set.count >= cfg.parallel_threshold {
+        // Each child a chunk of its own. This node is its chunk's only node: the chunks of
+        // parallel subtrees are made for sets at least this large, and the sets below a
+        // sequential node are smaller still.
+        debug_assert!(out.nodes.is_empty() && out.leaves.is_empty() && out.kids.is_empty());
+        let mut pieces = Vec::with_capacity(n);
+        let mut rest = prims;
+        let mut offset = 0usize;
+        for &k in order.iter() {
+            let s = children[k].0;
+            let (_, tail) = rest.split_at_mut(s.start - offset);
+            let (piece, tail) = tail.split_at_mut(s.count);
+            pieces.push((Set { start: s.start + base, ..s }, piece, children[k].2.take()));
+            rest = tail;
+            offset = s.start + s.count;
+        }
+        let built: Vec<(Aabb, u32, SubtreeCost, Chunk)> = pieces
+            .into_par_iter()
+            .map(|(s, piece, pre)| {
+                let mut kid = Chunk::default();
+                let (r, below) = recurse_at(s, piece, s.start, cfg, depth + 1, pre, &mut kid);
+                (s.bounds, r, below, kid)
+            })
+            .collect();
+        let index = out.open();
+        for (i, (b, r, below, kid)) in built.into_iter().enumerate() {
+            let r = out.attach(kid, r);
+            node.set(i, r, b.lo.into(), b.hi.into());
+            cost.add_child(&b, r, below);
+        }
+        return (out.close(index, node), cost);
+    }
+    let index = out.open();
     let mut rest = prims;
     let mut offset = 0usize;
-    for &k in order.iter() {
+    for (i, &k) in order.iter().enumerate() {
         let s = children[k].0;
         let (_, tail) = rest.split_at_mut(s.start - offset);
         let (piece, tail) = tail.split_at_mut(s.count);
-        pieces.push((Set { start: s.start + base, ..s }, piece, children[k].2.take()));
+        let abs = Set { start: s.start + base, ..s };
+        let (r, below) = recurse_at(abs, piece, abs.start, cfg, depth + 1, children[k].2.take(), out);
+        node.set(i, r, s.bounds.lo.into(), s.bounds.hi.into());
+        cost.add_child(&s.bounds, r, below);
         rest = tail;
         offset = s.start + s.count;
     }
-    let build_child = |(s, piece, pre): (Set, &mut [PrimRef], Option<Box<Presplit>>)| {
-        (s.bounds, recurse_at(s, piece, s.start, cfg, depth + 1, pre))
-    };
-    let built: Vec<(Aabb, BuildNode)> = if set.count >= cfg.parallel_threshold {
-        pieces.into_par_iter().map(build_child).collect()
-    } else {
-        pieces.into_iter().map(build_child).collect()
-    };
-    BuildNode::inner(built)
+    (out.close(index, node), cost)
 }
 
 #[cfg(test)]
@@ -830,32 +945,62 @@ mod tests {
             .collect()
     }
 
-    fn check(node: &BuildNode, prims: &[PrimRef], seen: &mut Vec<u32>, bounds: &Aabb) {
-        match node {
-            BuildNode::Leaf { start, count } => {
-                assert!(*count >= 1 && *count <= MAX_LEAF_BLOCKS * BLOCK);
-                for p in &prims[*start..start + count] {
+    /// A built tree placed into arrays: nodes, leaves, root reference.
+    fn placed(t: Built) -> (Vec<Node>, Vec<(usize, usize)>, u32) {
+        let mut nodes = vec![Node::default(); t.chunk.size.nodes];
+        let mut leaves = vec![(0, 0); t.chunk.size.leaves];
+        crate::bvh::place(t.chunk, &mut nodes, &mut leaves, 0, 0);
+        (nodes, leaves, t.root)
+    }
+
+    /// Checks that every primitive lies inside the boxes above it, that leaves hold what their
+    /// references say, and records the primitives met; returns the box of all of them.
+    fn check(tree: &(Vec<Node>, Vec<(usize, usize)>, u32), prims: &[PrimRef], seen: &mut Vec<u32>) -> Aabb {
+        let (nodes, leaves, root) = tree;
+        // The first block of each leaf, in leaf order.
+        let firsts: Vec<usize> = leaves
+            .iter()
+            .scan(0, |b, &(_, count)| {
+                let first = *b;
+                *b += count.div_ceil(BLOCK);
+                Some(first)
+            })
+            .collect();
+        let mut stack = vec![(*root, Aabb { lo: Vec3A::NEG_INFINITY, hi: Vec3A::INFINITY })];
+        let mut root_box = Aabb::EMPTY;
+        while let Some((r, bounds)) = stack.pop() {
+            if is_leaf(r) {
+                let (first, n) = leaf_blocks(r);
+                let (start, count) = leaves[firsts.binary_search(&first).expect("a leaf's first block")];
+                assert!((1..=MAX_LEAF_BLOCKS * BLOCK).contains(&count) && n == count.div_ceil(BLOCK));
+                for p in &prims[start..start + count] {
                     let pb = p.bounds();
                     assert!(bounds.lo.cmple(pb.lo).all() && pb.hi.cmple(bounds.hi).all());
+                    root_box.grow(&pb);
                     seen.push(p.id());
                 }
+                continue;
             }
-            BuildNode::Inner { children, .. } => {
-                assert!(children.len() >= 2 && children.len() <= WIDTH);
-                for (b, c) in children {
-                    check(c, prims, seen, b);
-                }
+            let node = &nodes[r as usize];
+            let used = node.child.iter().filter(|&&c| c != EMPTY).count();
+            assert!((2..=WIDTH).contains(&used) && node.child[..used].iter().all(|&c| c != EMPTY));
+            for i in 0..used {
+                let b = |a: usize| node.bounds[a][i];
+                let child = Aabb { lo: Vec3A::new(b(0), b(2), b(4)), hi: Vec3A::new(b(1), b(3), b(5)) };
+                stack.push((node.child[i], child));
             }
         }
+        root_box
     }
 
     #[test]
     fn every_primitive_in_exactly_one_leaf_inside_its_bounds() {
         for n in [1, 3, 5, 100, 10_000, 50_000] {
             let mut prims = prims_on_line(n);
-            let (b, root) = build(&mut prims, &BuildConfig::default()).unwrap();
+            let t = build(&mut prims, &BuildConfig::default()).unwrap();
+            let b = t.bounds;
             let mut seen = Vec::new();
-            check(&root, &prims, &mut seen, &b);
+            assert_eq!(check(&placed(t), &prims, &mut seen), b);
             seen.sort_unstable();
             assert_eq!(seen, (0..n as u32).collect::<Vec<_>>());
         }
@@ -958,16 +1103,11 @@ mod tests {
         }
     }
 
-    fn same_tree(a: &BuildNode, b: &BuildNode) -> bool {
-        match (a, b) {
-            (BuildNode::Leaf { start: s, count: c }, BuildNode::Leaf { start: t, count: d }) => s == t && c == d,
-            (BuildNode::Inner { children: x, size: sx }, BuildNode::Inner { children: y, size: sy }) => {
-                sx == sy
-                    && x.len() == y.len()
-                    && x.iter().zip(y).all(|((bx, cx), (by, cy))| bx == by && same_tree(cx, cy))
-            }
-            _ => false,
-        }
+    fn same_tree(a: &(Vec<Node>, Vec<(usize, usize)>, u32), b: &(Vec<Node>, Vec<(usize, usize)>, u32)) -> bool {
+        a.0.len() == b.0.len()
+            && a.0.iter().zip(&b.0).all(|(x, y)| x.bounds == y.bounds && x.child == y.child)
+            && a.1 == b.1
+            && a.2 == b.2
     }
 
     #[test]
@@ -985,10 +1125,12 @@ mod tests {
         prims.extend((20_000..23_000).map(|i| PrimRef::new(Aabb { lo: Vec3A::splat(5.0), hi: Vec3A::splat(6.0) }, i)));
         let cfg = BuildConfig::default();
         let mut plain = prims.clone();
-        let (pb, plain_tree) = build_presplit(&mut plain, &cfg, usize::MAX);
+        let plain_tree = build_presplit(&mut plain, &cfg, usize::MAX);
+        let (pb, plain_tree) = (plain_tree.bounds, placed(plain_tree));
         for min in [0, 100, 4096] {
             let mut ahead = prims.clone();
-            let (ab, tree) = build_presplit(&mut ahead, &cfg, min);
+            let tree = build_presplit(&mut ahead, &cfg, min);
+            let (ab, tree) = (tree.bounds, placed(tree));
             assert_eq!(pb, ab);
             assert!(same_tree(&plain_tree, &tree), "presplit from {min}");
             assert!(plain.iter().zip(&ahead).all(|(x, y)| x.id() == y.id()), "reference order, presplit from {min}");
@@ -1042,9 +1184,9 @@ mod tests {
     fn identical_centroids_still_split() {
         let mut prims: Vec<PrimRef> =
             (0..1000).map(|i| PrimRef::new(Aabb { lo: Vec3A::ZERO, hi: Vec3A::ONE }, i)).collect();
-        let (b, root) = build(&mut prims, &BuildConfig::default()).unwrap();
+        let t = build(&mut prims, &BuildConfig::default()).unwrap();
         let mut seen = Vec::new();
-        check(&root, &prims, &mut seen, &b);
+        check(&placed(t), &prims, &mut seen);
         assert_eq!(seen.len(), 1000);
     }
 }

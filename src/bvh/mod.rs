@@ -15,8 +15,8 @@ use glam::{Vec3, Vec3A};
 use rayon::prelude::*;
 
 pub use build::BuildConfig;
-use build::{Aabb, BuildNode, PrimRef};
-use node::{EMPTY, MAX_BLOCK_INDEX, Node, leaf_ref};
+use build::{Aabb, Chunk, PrimRef, SubtreeCost, rebase};
+use node::{EMPTY, MAX_BLOCK_INDEX, Node};
 pub use traverse::BoxTest;
 
 use crate::error::{Error, Result};
@@ -89,7 +89,7 @@ impl Bvh {
     /// Builds over every hittable triangle of `meshes` on the current rayon pool.
     pub fn build(meshes: &[TriangleMesh], cfg: &BuildConfig) -> Result<Bvh> {
         // Timed around the whole build, its statistics and the release of its temporaries (the
-        // builder's tree and reference array): all of it is the caller's wait, as Embree's
+        // builder's chunks and reference array): all of it is the caller's wait, as Embree's
         // `rtcCommitScene` includes its own clean-up.
         let start = Instant::now();
         let mut bvh = on_pool(|| Self::build_untimed(meshes, cfg))?;
@@ -156,9 +156,9 @@ impl Bvh {
                 let g = offsets.partition_point(|&o| o <= id) - 1;
                 meshes[g].triangle(id - offsets[g]).map(Vec3A::from)
             };
-            spatial::build(std::mem::take(&mut prims), &corners, &cfg.clamped()).map(|(b, node, refs)| {
+            spatial::build(std::mem::take(&mut prims), &corners, &cfg.clamped()).map(|(built, refs)| {
                 prims = refs;
-                (b, node)
+                built
             })
         } else {
             build::build(&mut prims, cfg)
@@ -167,32 +167,38 @@ impl Bvh {
             return Err(Error::TooManyTriangles(total));
         }
 
-        // Flatten depth-first: nodes and block ranges into arrays of the tree's final size, large
-        // subtrees in parallel (serially into growing vectors, igea's layout took 6 ms of a 2-thread
-        // build); then the triangle blocks of all leaves in parallel (each gathers scattered
-        // vertices, the costly part). An indexed collect writes the blocks straight into their
-        // vector: igea's blocks took 7–12 ms through per-leaf iterators and 3–5 ms this way.
-        let size = tree.as_ref().map(|t| t.1.size()).unwrap_or_default();
+        // The builder laid its tree out in chunks (one per subtree built in parallel): copy them
+        // into arrays of the tree's final size, large ones in parallel; then the triangle blocks of
+        // all leaves in parallel (each gathers scattered vertices, the costly part). An indexed
+        // collect writes the blocks straight into their vector: igea's blocks took 7–12 ms
+        // through per-leaf iterators and 3–5 ms this way.
+        let size = tree.as_ref().map(|t| t.chunk.size).unwrap_or_default();
+        if size.blocks > MAX_BLOCK_INDEX {
+            return Err(Error::TooManyTriangles(total));
+        }
         // Nodes and blocks on transparent huge pages where the OS grants them (`crate::sys`).
         let mut nodes: Vec<Node> = crate::sys::huge_vec(size.nodes);
-        let mut leaves: Vec<(usize, usize)> = if parallel {
+        // Small trees are appended in one pass; large ones copied in parallel into arrays of
+        // default values (their freshly mapped pages fault on both threads).
+        let big = parallel && size.nodes >= PLACE_PARALLEL_NODES;
+        let mut leaves: Vec<(usize, usize)> = if big {
             rayon::join(
                 || nodes.par_extend((0..size.nodes).into_par_iter().map(|_| Node::default())),
                 || (0..size.leaves).into_par_iter().map(|_| (0, 0)).collect(),
             )
             .1
         } else {
-            nodes.resize(size.nodes, Node::default());
-            vec![(0, 0); size.leaves]
+            Vec::with_capacity(size.leaves)
         };
-        // The layout consumes the builder's tree, so that its nodes are freed by the threads
-        // laying them out (a serial drop and statistics walk afterwards took 10–15% of a build).
         let (root, bounds, cost) = match tree {
             None => (EMPTY, None, SubtreeCost::default()),
-            Some((b, node)) => {
-                let own = node_cost(&b, &node);
-                let (r, below) = layout(node, 0, &mut nodes, &mut leaves, 0, parallel);
-                (r, Some((Vec3::from(b.lo), Vec3::from(b.hi))), SubtreeCost { sah: own + below.sah, ..below })
+            Some(t) => {
+                if big {
+                    place(t.chunk, &mut nodes, &mut leaves, 0, 0);
+                } else {
+                    append(t.chunk, &mut nodes, &mut leaves, 0);
+                }
+                (t.root, Some((Vec3::from(t.bounds.lo), Vec3::from(t.bounds.hi))), t.cost)
             }
         };
         // One entry per block, `(first primitive, primitives)`, so that the blocks are filled by an
@@ -262,85 +268,70 @@ pub(crate) fn on_pool<R: Send>(f: impl FnOnce() -> R + Send) -> R {
     if rayon::current_thread_index().is_some() { f() } else { rayon::scope(|_| f()) }
 }
 
-/// A subtree's share of the SAH cost as Embree's `BVHNStatistics` counts it (the half area of
-/// every inner node, the half area of every leaf times its blocks; not yet relative to the
-/// root's), and its depth in wide levels.
-#[derive(Clone, Copy, Debug, Default)]
-struct SubtreeCost {
-    sah: f64,
-    depth: usize,
-}
+/// Trees of at least this many nodes are placed in parallel ([`place`]), smaller ones appended
+/// ([`append`]): bunny (5k nodes), 2 threads: appended 0.15 ms against 0.6 before chunks (a
+/// parallel layout of the builder's node tree); igea (20k) and the sphereflake (36k) the same
+/// either way.
+const PLACE_PARALLEL_NODES: usize = 16 * 1024;
 
-/// The cost of node `n` itself, whose box is `b`.
-fn node_cost(b: &Aabb, n: &BuildNode) -> f64 {
-    match n {
-        BuildNode::Leaf { count, .. } => b.half_area() as f64 * count.div_ceil(BLOCK) as f64,
-        BuildNode::Inner { .. } => b.half_area() as f64,
+/// Appends `chunk` and its kids to `nodes` and `leaves`, the chunk's first block being block
+/// `block_base`.
+fn append(chunk: Chunk, nodes: &mut Vec<Node>, leaves: &mut Vec<(usize, usize)>, block_base: usize) {
+    let node_base = nodes.len();
+    nodes.extend(chunk.nodes.iter().map(|n| {
+        let mut n = *n;
+        for c in &mut n.child {
+            *c = rebase(*c, node_base, block_base);
+        }
+        n
+    }));
+    leaves.extend_from_slice(&chunk.leaves);
+    let mut bb = block_base + chunk.own_blocks;
+    for kid in chunk.kids {
+        let blocks = kid.size.blocks;
+        append(kid, nodes, leaves, bb);
+        bb += blocks;
     }
 }
 
-/// One child's share of a parallel layout: bounds, subtree, first node index, node and leaf
-/// slices, first block.
-type LayoutJob<'a> = (Aabb, BuildNode, usize, &'a mut [Node], &'a mut [(usize, usize)], usize);
-
-/// Lays `node` out depth-first: itself in `nodes[0]` (index `base` of the whole node array), its
-/// subtree in the rest of `nodes`, its leaves' primitive ranges in order in `leaves`, their blocks
-/// numbered from `block`. Returns the child reference naming it and the cost of the nodes below
-/// it; frees the subtree as it goes. The slices have exactly the subtree's size, so that large
-/// subtrees are laid out in parallel (if `parallel`).
-fn layout(
-    node: BuildNode,
-    base: usize,
+/// Copies `chunk` and its kids into `nodes` and `leaves` (exactly their size), the chunk's
+/// first node being node `node_base` of the whole array and its first block `block_base`: its
+/// own nodes and leaves first, then each kid's, kids in parallel (they were built in parallel, so
+/// each is large).
+pub(crate) fn place(
+    chunk: Chunk,
     nodes: &mut [Node],
     leaves: &mut [(usize, usize)],
-    block: usize,
-    parallel: bool,
-) -> (u32, SubtreeCost) {
-    match node {
-        BuildNode::Leaf { start, count } => {
-            leaves[0] = (start, count);
-            (leaf_ref(block, count.div_ceil(BLOCK)), SubtreeCost::default())
-        }
-        BuildNode::Inner { children, size } => {
-            let (me, mut rest) = nodes.split_first_mut().expect("an inner node's slice holds it");
-            let mut rest_leaves = leaves;
-            let (mut index, mut block) = (base + 1, block);
-            // Each child's share of the arrays, in order.
-            let jobs = children.into_iter().map(|(b, c)| {
-                let s = c.size();
-                let (n, tail) = std::mem::take(&mut rest).split_at_mut(s.nodes);
-                let (l, ltail) = std::mem::take(&mut rest_leaves).split_at_mut(s.leaves);
-                let job = (b, c, index, n, l, block);
-                (rest, rest_leaves) = (tail, ltail);
-                index += s.nodes;
-                block += s.blocks;
-                job
-            });
-            let lay = |(b, c, index, n, l, block): LayoutJob<'_>| {
-                let own = node_cost(&b, &c);
-                let (r, below) = layout(c, index, n, l, block, parallel);
-                (r, b, own + below.sah, below.depth)
-            };
-            let mut cost = SubtreeCost::default();
-            // Subtrees of a few hundred nodes are not worth a task. (`nodes` holds defaults: only
-            // the used slots are set.)
-            if parallel && size.nodes >= 256 {
-                let jobs: Vec<LayoutJob<'_>> = jobs.collect();
-                let refs: Vec<(u32, Aabb, f64, usize)> = jobs.into_par_iter().map(lay).collect();
-                for (i, (r, b, sah, depth)) in refs.into_iter().enumerate() {
-                    me.set(i, r, b.lo.into(), b.hi.into());
-                    cost = SubtreeCost { sah: cost.sah + sah, depth: cost.depth.max(depth + 1) };
-                }
-            } else {
-                for (i, job) in jobs.enumerate() {
-                    let (r, b, sah, depth) = lay(job);
-                    me.set(i, r, b.lo.into(), b.hi.into());
-                    cost = SubtreeCost { sah: cost.sah + sah, depth: cost.depth.max(depth + 1) };
-                }
-            }
-            (base as u32, cost)
+    node_base: usize,
+    block_base: usize,
+) {
+    let (own, rest) = nodes.split_at_mut(chunk.nodes.len());
+    for (dst, src) in own.iter_mut().zip(&chunk.nodes) {
+        *dst = *src;
+        for c in &mut dst.child {
+            *c = rebase(*c, node_base, block_base);
         }
     }
+    let (own_leaves, rest_leaves) = leaves.split_at_mut(chunk.leaves.len());
+    own_leaves.copy_from_slice(&chunk.leaves);
+    if chunk.kids.is_empty() {
+        return;
+    }
+    let (mut rest, mut rest_leaves) = (rest, rest_leaves);
+    let (mut nb, mut bb) = (node_base + chunk.nodes.len(), block_base + chunk.own_blocks);
+    let jobs: Vec<_> = chunk
+        .kids
+        .into_iter()
+        .map(|kid| {
+            let (n, tail) = std::mem::take(&mut rest).split_at_mut(kid.size.nodes);
+            let (l, ltail) = std::mem::take(&mut rest_leaves).split_at_mut(kid.size.leaves);
+            (rest, rest_leaves) = (tail, ltail);
+            let job = (n, l, nb, bb);
+            (nb, bb) = (nb + kid.size.nodes, bb + kid.size.blocks);
+            (kid, job)
+        })
+        .collect();
+    jobs.into_par_iter().for_each(|(kid, (n, l, nb, bb))| place(kid, n, l, nb, bb));
 }
 
 #[cfg(test)]
@@ -367,8 +358,32 @@ mod tests {
     }
 
     #[test]
+    fn chunks_placed_in_parallel_and_appended_give_the_same_arrays() {
+        let mesh = procedural::sphereflake(2, 6, 12);
+        let mut prims: Vec<PrimRef> = (0..mesh.triangle_count())
+            .map(|i| {
+                let [a, b, c] = mesh.triangle(i).map(Vec3A::from);
+                PrimRef::new(Aabb { lo: a.min(b).min(c), hi: a.max(b).max(c) }, i as u32)
+            })
+            .collect();
+        let cfg = BuildConfig { parallel_threshold: 256, ..BuildConfig::default() };
+        let mut same = prims.clone();
+        let built = build::build(&mut prims, &cfg).unwrap();
+        assert!(!built.chunk.kids.is_empty() && built.chunk.kids.iter().any(|k| !k.kids.is_empty()));
+        let again = build::build(&mut same, &cfg).unwrap();
+        let size = built.chunk.size;
+        let (mut nodes, mut leaves) = (vec![Node::default(); size.nodes], vec![(0, 0); size.leaves]);
+        place(built.chunk, &mut nodes, &mut leaves, 0, 0);
+        let (mut appended, mut appended_leaves) = (Vec::new(), Vec::new());
+        append(again.chunk, &mut appended, &mut appended_leaves, 0);
+        assert_eq!(leaves, appended_leaves);
+        assert!(nodes.iter().zip(&appended).all(|(x, y)| x.bounds == y.bounds && x.child == y.child));
+        assert_eq!(nodes.len(), appended.len());
+    }
+
+    #[test]
     fn flat_layout_is_depth_first_and_complete_in_parallel_and_serially() {
-        // 10,920 triangles: above the parallel threshold, with subtrees of more than 256 nodes.
+        // 10,920 triangles: above the parallel threshold, so that the builder's chunks have kids.
         let mesh = procedural::sphereflake(2, 6, 12);
         for parallel_threshold in [1024, usize::MAX / 2] {
             let cfg = BuildConfig { parallel_threshold, ..BuildConfig::default() };
