@@ -111,7 +111,7 @@ out.append("\n### Scaling\n")
 out.append(
     "The same run, on sphereflakes of one shape from 11 thousand to 11 million triangles (`--scaling`: 512×512 primary rays, best of 3 passes, one build each). Best API per engine, Mrays/s strahl / Embree (ratio):\n"
 )
-out.append("| triangles | primary | shadow | diffuse | hit/miss agree (min) | build ms strahl / Embree | bytes/tri strahl / Embree |")
+out.append("| triangles | primary | shadow | diffuse | hit/miss agree (min) | build ms strahl / Embree (best of 2) | bytes/tri strahl / Embree |")
 out.append("|---:|---:|---:|---:|---:|---:|---:|")
 for s in d["scaling"]:
     cells = [f"{a:.1f} / {b:.1f} ({a / b:.2f}×)" for (_, a, b) in s["mrays"]]

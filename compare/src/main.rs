@@ -172,7 +172,7 @@ fn main() -> anyhow::Result<()> {
         let small = Settings {
             width: args.width.min(512),
             passes: args.passes.min(3),
-            build_repeats: 1,
+            build_repeats: 2,
             keep_rays: false,
             ..Settings::default()
         };
