@@ -109,7 +109,7 @@ for t in d["instancing_translations"]:
     )
 out.append("\n### Scaling\n")
 out.append(
-    "The same run, on sphereflakes of one shape from 11 thousand to 11 million triangles (`--scaling`: 512×512 primary rays, best of 3 passes, one build each). Best API per engine, Mrays/s strahl / Embree (ratio):\n"
+    "The same run, on sphereflakes of one shape from 11 thousand to 11 million triangles (`--scaling`: 512×512 primary rays, best of 3 passes, best of 2 builds). Best API per engine, Mrays/s strahl / Embree (ratio):\n"
 )
 out.append("| triangles | primary | shadow | diffuse | hit/miss agree (min) | build ms strahl / Embree (best of 2) | bytes/tri strahl / Embree |")
 out.append("|---:|---:|---:|---:|---:|---:|---:|")
