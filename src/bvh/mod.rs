@@ -274,17 +274,16 @@ pub(crate) fn on_pool<R: Send>(f: impl FnOnce() -> R + Send) -> R {
 /// either way.
 const PLACE_PARALLEL_NODES: usize = 16 * 1024;
 
+/// `n` from a chunk placed `node_base` nodes and `block_base` blocks into the arrays.
+fn rebased(n: &Node, node_base: usize, block_base: usize) -> Node {
+    Node { child: n.child.map(|c| rebase(c, node_base, block_base)), ..*n }
+}
+
 /// Appends `chunk` and its kids to `nodes` and `leaves`, the chunk's first block being block
 /// `block_base`.
 fn append(chunk: Chunk, nodes: &mut Vec<Node>, leaves: &mut Vec<(usize, usize)>, block_base: usize) {
     let node_base = nodes.len();
-    nodes.extend(chunk.nodes.iter().map(|n| {
-        let mut n = *n;
-        for c in &mut n.child {
-            *c = rebase(*c, node_base, block_base);
-        }
-        n
-    }));
+    nodes.extend(chunk.nodes.iter().map(|n| rebased(n, node_base, block_base)));
     leaves.extend_from_slice(&chunk.leaves);
     let mut bb = block_base + chunk.own_blocks;
     for kid in chunk.kids {
@@ -307,10 +306,7 @@ pub(crate) fn place(
 ) {
     let (own, rest) = nodes.split_at_mut(chunk.nodes.len());
     for (dst, src) in own.iter_mut().zip(&chunk.nodes) {
-        *dst = *src;
-        for c in &mut dst.child {
-            *c = rebase(*c, node_base, block_base);
-        }
+        *dst = rebased(src, node_base, block_base);
     }
     let (own_leaves, rest_leaves) = leaves.split_at_mut(chunk.leaves.len());
     own_leaves.copy_from_slice(&chunk.leaves);
