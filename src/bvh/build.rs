@@ -698,12 +698,7 @@ fn partition_hoare(prims: &mut [PrimRef], split: &Split) -> (usize, [(Aabb, Aabb
 }
 
 fn set_of(prims: &[PrimRef], start: usize) -> Set {
-    let mut bounds = Aabb::EMPTY;
-    let mut centroids = Aabb::EMPTY;
-    for p in prims {
-        bounds.grow(&p.bounds());
-        centroids.grow_point(p.center2());
-    }
+    let (bounds, centroids) = bounds_of(prims);
     Set { start, count: prims.len(), bounds, centroids }
 }
 
@@ -744,6 +739,14 @@ pub(crate) struct Built {
     pub cost: SubtreeCost,
 }
 
+impl Built {
+    /// The tree whose root, with box `bounds`, is `root` in `chunk`, `below` costing the rest.
+    pub fn new(bounds: Aabb, chunk: Chunk, root: u32, below: SubtreeCost) -> Self {
+        let cost = SubtreeCost { sah: node_cost(&bounds, root) + below.sah, depth: below.depth };
+        Built { bounds, chunk, root, cost }
+    }
+}
+
 /// [`build`] of a non-empty set, splitting sets of `presplit_min` or more ahead.
 fn build_presplit(prims: &mut [PrimRef], cfg: &BuildConfig, presplit_min: usize) -> Built {
     let cfg = cfg.clamped();
@@ -752,8 +755,7 @@ fn build_presplit(prims: &mut [PrimRef], cfg: &BuildConfig, presplit_min: usize)
     let pre = presplit(root, prims, 0, &cfg, min, 0);
     let mut chunk = Chunk::default();
     let (r, below) = recurse_at(root, prims, 0, &cfg, 0, pre, &mut chunk);
-    let cost = SubtreeCost { sah: node_cost(&root.bounds, r) + below.sah, depth: below.depth };
-    Built { bounds: root.bounds, chunk, root: r, cost }
+    Built::new(root.bounds, chunk, r, below)
 }
 
 /// Sets of at least this many references are split ahead of the wide nodes ([`presplit`]).
@@ -1171,8 +1173,13 @@ mod tests {
                         };
                         assert_eq!(sorted(&p), sorted(&prims[..len]));
                         for (side, part) in [(sides[0], &p[..mid]), (sides[1], &p[mid..])] {
-                            let s = set_of(part, 0);
-                            assert_eq!(side, (s.bounds, s.centroids), "len {len}, blocks {blocks}");
+                            // One reference at a time, the plain way.
+                            let (mut b, mut c) = (Aabb::EMPTY, Aabb::EMPTY);
+                            for q in part {
+                                b.grow(&q.bounds());
+                                c.grow_point(q.center2());
+                            }
+                            assert_eq!(side, (b, c), "len {len}, blocks {blocks}");
                         }
                     }
                 }

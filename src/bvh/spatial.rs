@@ -18,8 +18,7 @@ use glam::Vec3A;
 use rayon::prelude::*;
 
 use super::build::{
-    Aabb, BuildConfig, Built, Chunk, MEDIAN_DEPTH, PrimRef, Split, SubtreeCost, blocks, find_split, node_cost,
-    partition,
+    Aabb, BuildConfig, Built, Chunk, MEDIAN_DEPTH, PrimRef, Split, SubtreeCost, blocks, find_split, partition,
 };
 use super::node::Node;
 use super::node::WIDTH;
@@ -118,8 +117,7 @@ pub(crate) fn build(prims: Vec<PrimRef>, corners: &Corners<'_>, cfg: &BuildConfi
     let tree = recurse(root, &ctx, 0);
     let (mut refs, mut chunk) = (Vec::new(), Chunk::default());
     let (r, below) = flatten(tree, &mut refs, &mut chunk);
-    let cost = SubtreeCost { sah: node_cost(&bounds, r) + below.sah, depth: below.depth };
-    Some((Built { bounds, chunk, root: r, cost }, refs))
+    Some((Built::new(bounds, chunk, r, below), refs))
 }
 
 /// Lays `tree` out into `out` (one chunk), its leaves' references appended to `refs`; returns
