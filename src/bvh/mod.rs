@@ -92,7 +92,14 @@ impl Bvh {
         // builder's chunks and reference array): all of it is the caller's wait, as Embree's
         // `rtcCommitScene` includes its own clean-up.
         let start = Instant::now();
-        let mut bvh = on_pool(|| Self::build_untimed(meshes, cfg))?;
+        // A build too small to run in parallel stays on the calling thread: handing it to the
+        // pool from outside would cost two thread switches, more than the whole build.
+        let total: usize = meshes.iter().map(|m| m.triangle_count()).sum();
+        let mut bvh = if total < cfg.parallel_threshold {
+            Self::build_untimed(meshes, cfg)?
+        } else {
+            on_pool(|| Self::build_untimed(meshes, cfg))?
+        };
         bvh.stats.build_ms = start.elapsed().as_secs_f64() * 1e3;
         Ok(bvh)
     }
