@@ -47,7 +47,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             last = Some(s);
         }
         std::hint::black_box(last);
-        println!("build_ms (as the harness reports it): {inner:.3}");
+        println!("build_ms (as the harness reports it): {inner:.4}");
         let m = meshes.clone();
         let st = strahl::Scene::build(m, &cfg)?.stats().clone();
         println!(

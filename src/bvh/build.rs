@@ -97,6 +97,65 @@ impl BuildConfig {
 /// Most bins per axis (fixed-size bin arrays on the stack).
 pub const MAX_BINS: usize = 32;
 
+/// How many bins a set of `n` references is binned into (at most [`BuildConfig::bins`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum BinRule {
+    /// `n/2` up to 16 bins, then `4 + n/8` (all 32 from 224 references): the default.
+    Fine,
+    /// Embree's `4 + n/20`, with its bin mapping: the second tree of small builds
+    /// ([`SMALL_BUILD`]).
+    Coarse,
+}
+
+impl BinRule {
+    fn bins(self, n: usize, max: usize) -> usize {
+        match self {
+            BinRule::Fine => (4 + n / 8).max((n / 2).min(16)),
+            BinRule::Coarse => 4 + n / 20,
+        }
+        .min(max.max(4))
+    }
+
+    /// The bin mapping's scale, `bins / extent` times this: slightly less than 1 so that the
+    /// largest centroid lands in the last bin (Embree's 0.99 for the coarse rule).
+    fn mapping(self) -> f32 {
+        match self {
+            BinRule::Fine => 0.99999,
+            BinRule::Coarse => 0.99,
+        }
+    }
+}
+
+/// What a build runs with: the caller's configuration (clamped) and the bin rule of this tree.
+/// Reads as a [`BuildConfig`] through `Deref`.
+#[derive(Clone, Debug)]
+pub(super) struct Settings {
+    pub cfg: BuildConfig,
+    pub rule: BinRule,
+}
+
+impl Settings {
+    pub fn new(cfg: &BuildConfig, rule: BinRule) -> Self {
+        Self { cfg: cfg.clamped(), rule }
+    }
+}
+
+impl std::ops::Deref for Settings {
+    type Target = BuildConfig;
+    fn deref(&self) -> &BuildConfig {
+        &self.cfg
+    }
+}
+
+/// Builds of at most this many references are made twice, with the [`BinRule::Fine`] and the
+/// [`BinRule::Coarse`] rule, and the tree of lower SAH cost is kept. Trees this small are a node
+/// or two deep, so the few splits that fill the root decide the whole tree, and which bin
+/// boundaries they can choose from is a lottery neither rule wins everywhere: the shared
+/// 34-triangle Cornell box costs 4.32 with the fine rule and 4.04 with the coarse one (Embree
+/// MEDIUM's tree), the 32-triangle measured one 3.93 with the fine rule. The second tree adds
+/// 2–3 µs to a build of 4–6 (PERFORMANCE.md).
+pub(super) const SMALL_BUILD: usize = 64;
+
 /// Past this many wide levels, sets are split at the object median so that depth (and the
 /// traversal stack) stays bounded whatever the input.
 pub(crate) const MEDIAN_DEPTH: usize = 40;
@@ -447,16 +506,13 @@ pub(super) const BIN_CHUNK: usize = 4096;
 
 /// The best binned SAH split of `prims` (whose doubled centroids lie in `cb`), if any axis has
 /// extent.
-pub(super) fn find_split(prims: &[PrimRef], cb: &Aabb, cfg: &BuildConfig) -> Option<Split> {
+pub(super) fn find_split(prims: &[PrimRef], cb: &Aabb, cfg: &Settings) -> Option<Split> {
     // Small sets get fewer bins: the bins are cleared and swept on every call, and a set of 10
-    // primitives gains nothing from 32 of them. `n/2` up to 16 bins, then `4 + n/8` (all 32 from
-    // 224 primitives): between `n/2` and Embree's `4 + n/20` (PERFORMANCE.md has the SAH and
-    // times of each).
-    let n = prims.len();
-    let nb = (4 + n / 8).max((n / 2).min(16)).min(cfg.bins.max(4));
+    // primitives gains nothing from 32 of them. The fine rule lies between `n/2` and Embree's
+    // `4 + n/20` (PERFORMANCE.md has the SAH and times of each).
+    let nb = cfg.rule.bins(prims.len(), cfg.bins);
     let ext = cb.hi - cb.lo;
-    // Slightly less than nb / extent so that the largest centroid lands in the last bin.
-    let scale = Vec3A::select(ext.cmpgt(Vec3A::ZERO), Vec3A::splat(nb as f32 * 0.99999) / ext, Vec3A::ZERO);
+    let scale = Vec3A::select(ext.cmpgt(Vec3A::ZERO), Vec3A::splat(nb as f32 * cfg.rule.mapping()) / ext, Vec3A::ZERO);
     if prims.len() >= 4 * BIN_CHUNK {
         return find_split_parallel(prims, cb, nb, scale);
     }
@@ -726,7 +782,22 @@ pub(crate) fn build(prims: &mut [PrimRef], cfg: &BuildConfig) -> Option<Built> {
     if prims.is_empty() {
         return None;
     }
-    Some(build_presplit(prims, cfg, PRESPLIT_MIN))
+    let fine = build_with_rule(prims, cfg, BinRule::Fine);
+    if prims.len() > SMALL_BUILD {
+        return Some(fine);
+    }
+    let mut alt = prims.to_vec();
+    let coarse = build_with_rule(&mut alt, cfg, BinRule::Coarse);
+    if coarse.cost.sah < fine.cost.sah {
+        prims.copy_from_slice(&alt);
+        return Some(coarse);
+    }
+    Some(fine)
+}
+
+/// [`build`] of a non-empty set with one bin rule.
+pub(super) fn build_with_rule(prims: &mut [PrimRef], cfg: &BuildConfig, rule: BinRule) -> Built {
+    build_presplit(prims, &Settings::new(cfg, rule), PRESPLIT_MIN)
 }
 
 /// A built tree: its root bounds, its nodes in chunks, the root's reference (absolute: the top
@@ -748,13 +819,12 @@ impl Built {
 }
 
 /// [`build`] of a non-empty set, splitting sets of `presplit_min` or more ahead.
-fn build_presplit(prims: &mut [PrimRef], cfg: &BuildConfig, presplit_min: usize) -> Built {
-    let cfg = cfg.clamped();
+fn build_presplit(prims: &mut [PrimRef], cfg: &Settings, presplit_min: usize) -> Built {
     let root = set_of(prims, 0);
     let min = presplit_min.max(cfg.max_leaf + 1);
-    let pre = presplit(root, prims, 0, &cfg, min, 0);
+    let pre = presplit(root, prims, 0, cfg, min, 0);
     let mut chunk = Chunk::default();
-    let (r, below) = recurse_at(root, prims, 0, &cfg, 0, pre, &mut chunk);
+    let (r, below) = recurse_at(root, prims, 0, cfg, 0, pre, &mut chunk);
     Built::new(root.bounds, chunk, r, below)
 }
 
@@ -783,7 +853,7 @@ fn presplit(
     set: Set,
     prims: &mut [PrimRef],
     base: usize,
-    cfg: &BuildConfig,
+    cfg: &Settings,
     min: usize,
     depth: usize,
 ) -> Option<Box<Presplit>> {
@@ -814,7 +884,7 @@ fn recurse_at(
     set: Set,
     prims: &mut [PrimRef],
     base: usize,
-    cfg: &BuildConfig,
+    cfg: &Settings,
     depth: usize,
     pre: Option<Box<Presplit>>,
     out: &mut Chunk,
@@ -1125,7 +1195,7 @@ mod tests {
             })
             .collect();
         prims.extend((20_000..23_000).map(|i| PrimRef::new(Aabb { lo: Vec3A::splat(5.0), hi: Vec3A::splat(6.0) }, i)));
-        let cfg = BuildConfig::default();
+        let cfg = Settings::new(&BuildConfig::default(), BinRule::Fine);
         let mut plain = prims.clone();
         let plain_tree = build_presplit(&mut plain, &cfg, usize::MAX);
         let (pb, plain_tree) = (plain_tree.bounds, placed(plain_tree));
@@ -1153,7 +1223,7 @@ mod tests {
         for prims in [random.clone(), prims_on_line(5000)] {
             for len in [1, 2, 100, 129, 200, 1000, 5000] {
                 let set = set_of(&prims[..len], 0);
-                let cfg = BuildConfig::default().clamped();
+                let cfg = Settings::new(&BuildConfig::default(), BinRule::Fine);
                 let Some(split) = find_split(&prims[..len], &set.centroids, &cfg) else { continue };
                 for split in [split, Split { pos: 0, ..split }, Split { pos: 1000, ..split }] {
                     for blocks in [false, true] {
@@ -1195,5 +1265,38 @@ mod tests {
         let mut seen = Vec::new();
         check(&placed(t), &prims, &mut seen);
         assert_eq!(seen.len(), 1000);
+    }
+
+    #[test]
+    fn small_builds_keep_the_cheaper_of_the_two_bin_rules_trees() {
+        // Random boxes, some long and thin as walls: each rule's tree is the cheaper one for some
+        // of these sets, and the build keeps that one, whole and in its bounds.
+        let mut rng = Pcg32::new(9, 3);
+        let mut r = || rng.next_u32() as f32 / u32::MAX as f32;
+        let (mut coarse_won, mut fine_won) = (0, 0);
+        for set in 0..300 {
+            let n = 8 + set % (SMALL_BUILD - 7);
+            let prims: Vec<PrimRef> = (0..n as u32)
+                .map(|i| {
+                    let lo = Vec3A::new(r(), r(), r()) * 10.0;
+                    let long = Vec3A::new(r(), r(), r()).cmpgt(Vec3A::splat(0.7));
+                    let ext = Vec3A::select(long, Vec3A::splat(10.0 * r()), Vec3A::new(r(), r(), r()));
+                    PrimRef::new(Aabb { lo, hi: lo + ext }, i)
+                })
+                .collect();
+            let cfg = BuildConfig::default();
+            let fine = build_with_rule(&mut prims.clone(), &cfg, BinRule::Fine).cost.sah;
+            let coarse = build_with_rule(&mut prims.clone(), &cfg, BinRule::Coarse).cost.sah;
+            let mut kept = prims.clone();
+            let t = build(&mut kept, &cfg).unwrap();
+            assert_eq!(t.cost.sah, fine.min(coarse), "set {set}");
+            coarse_won += usize::from(coarse < fine);
+            fine_won += usize::from(fine < coarse);
+            let mut seen = Vec::new();
+            check(&placed(t), &kept, &mut seen);
+            seen.sort_unstable();
+            assert_eq!(seen, (0..n as u32).collect::<Vec<_>>(), "set {set}");
+        }
+        assert!(coarse_won > 0 && fine_won > 0, "coarse cheaper {coarse_won} times, fine {fine_won}");
     }
 }

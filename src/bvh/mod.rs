@@ -192,7 +192,7 @@ impl Bvh {
                 let g = offsets.partition_point(|&o| o <= id) - 1;
                 meshes[g].triangle(id - offsets[g]).map(Vec3A::from)
             };
-            spatial::build(std::mem::take(&mut prims), &corners, &cfg.clamped()).map(|(built, refs)| {
+            spatial::build(std::mem::take(&mut prims), &corners, cfg).map(|(built, refs)| {
                 prims = refs;
                 built
             })

@@ -18,7 +18,8 @@ use glam::Vec3A;
 use rayon::prelude::*;
 
 use super::build::{
-    Aabb, BuildConfig, Built, Chunk, MEDIAN_DEPTH, PrimRef, Split, SubtreeCost, blocks, find_split, partition,
+    Aabb, BinRule, BuildConfig, Built, Chunk, MEDIAN_DEPTH, PrimRef, SMALL_BUILD, Settings, Split, SubtreeCost, blocks,
+    find_split, partition,
 };
 use super::node::Node;
 use super::node::WIDTH;
@@ -50,7 +51,7 @@ const CLIP_PAD: f32 = 1.0 / (1u32 << 20) as f32;
 pub(crate) type Corners<'a> = dyn Fn(u32) -> [Vec3A; 3] + Sync + 'a;
 
 struct Ctx<'a> {
-    cfg: &'a BuildConfig,
+    cfg: &'a Settings,
     corners: &'a Corners<'a>,
     /// References that spatial splits may still add.
     budget: AtomicIsize,
@@ -113,6 +114,22 @@ pub(crate) fn build(prims: Vec<PrimRef>, corners: &Corners<'_>, cfg: &BuildConfi
     if prims.is_empty() {
         return None;
     }
+    // Small builds: also the object-split tree of the coarse bin rule (see `SMALL_BUILD`), kept
+    // if cheaper. A coarse tree with spatial splits would double the build; this one adds a
+    // tenth.
+    let coarse = (prims.len() <= SMALL_BUILD).then(|| {
+        let mut refs = prims.clone();
+        (super::build::build_with_rule(&mut refs, cfg, BinRule::Coarse), refs)
+    });
+    let spatial = build_with(prims, corners, &Settings::new(cfg, BinRule::Fine));
+    match coarse {
+        Some(c) if c.0.cost.sah < spatial.0.cost.sah => Some(c),
+        _ => Some(spatial),
+    }
+}
+
+/// [`build`] of a non-empty set with one bin rule.
+fn build_with(prims: Vec<PrimRef>, corners: &Corners<'_>, cfg: &Settings) -> (Built, Vec<PrimRef>) {
     let extra = ((cfg.split_factor - 1.0).max(0.0) as f64 * prims.len() as f64) as isize;
     let root = Set::of(prims);
     let ctx = Ctx {
@@ -125,7 +142,7 @@ pub(crate) fn build(prims: Vec<PrimRef>, corners: &Corners<'_>, cfg: &BuildConfi
     let tree = recurse(root, &ctx, 0);
     let (mut refs, mut chunk) = (Vec::new(), Chunk::default());
     let (r, below) = flatten(tree, &mut refs, &mut chunk);
-    Some((Built::new(bounds, chunk, r, below), refs))
+    (Built::new(bounds, chunk, r, below), refs)
 }
 
 /// Lays `tree` out into `out` (one chunk), its leaves' references appended to `refs`; returns
@@ -512,7 +529,7 @@ mod tests {
             .collect();
         let set = Set::of(prims);
         let corners = |id: u32| tris[id as usize];
-        let cfg = BuildConfig::high().clamped();
+        let cfg = Settings::new(&BuildConfig::high(), BinRule::Fine);
         let ctx =
             Ctx { cfg: &cfg, corners: &corners, budget: AtomicIsize::new(100), root_area: set.bounds.half_area() };
         best_cut(&set, &ctx)
