@@ -44,7 +44,7 @@ for s in flat:
             f"| {s['name']} | {c['class']} | {fnum(c['rays'])} | {pct(c['hit_miss_agreement'])} | {pct(c['prim_agreement'])} | "
             f"{c['t_rel_p999']:.1e} | {apis(c['mrays']['strahl'])} | {apis(c['mrays']['embree'])} | **{c['best_ratio']:.2f}×** | {c['ratio']['single']:.2f}× |"
         )
-out.append("\nMrays/s, best of the timed passes. Build (2 threads, best of 5):\n")
+out.append("\nMrays/s, best of the timed passes. Build (2 threads): best of interleaved rounds of all four builds, at least 5 and more while the rounds take under 0.3 s (up to 200):\n")
 out.append("| scene | triangles | strahl ms | Embree MEDIUM ms | ratio | SAH strahl / Embree | strahl HIGH ms | Embree HIGH ms | HIGH ratio | SAH strahl HIGH / Embree HIGH | bytes/tri strahl / Embree, MEDIUM · HIGH |")
 out.append("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
 def f1(x):

@@ -2,7 +2,7 @@
 //! BENCHMARKING.md, trace the same rays through every API of both engines on one pool of worker
 //! threads (FTZ/DAZ set on each), time interleaved passes, and diff the answers.
 
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use glam::Vec3;
 use rayon::prelude::*;
@@ -416,23 +416,37 @@ pub fn run_scene(
     let meshes = spec.load()?;
     let triangles: usize = meshes.iter().map(|m| m.triangle_count()).sum();
 
-    // Builds: best of a few, each engine on the same 2 threads.
+    // Builds: each engine on the same 2 threads, in interleaved rounds (BENCHMARKING.md's rule
+    // for passes), best of each.
     progress("building");
-    let reps = settings.build_repeats;
-    let (scene, strahl_ms) = best_build(
-        reps,
-        || Ok(pool.install(|| Scene::build(meshes.clone(), &BuildConfig::default()))?),
-        |s| s.stats().build_ms,
+    let (mut scene, mut escene, mut high) = (None, None, None);
+    let [strahl_ms, embree_ms, embree_high_ms, strahl_high_ms] = build_rounds(
+        settings.build_repeats,
+        [
+            &mut || {
+                let s = pool.install(|| Scene::build(meshes.clone(), &BuildConfig::default()))?;
+                let ms = s.stats().build_ms;
+                scene = Some(s);
+                Ok(ms)
+            },
+            &mut || {
+                let e = embree::Scene::build(device, &meshes, embree::Quality::Medium, false)?;
+                let ms = e.build_ms;
+                escene = Some(e);
+                Ok(ms)
+            },
+            &mut || Ok(embree::Scene::build(device, &meshes, embree::Quality::High, false)?.build_ms),
+            &mut || {
+                let s = pool.install(|| Scene::build(meshes.clone(), &BuildConfig::high()))?;
+                let ms = s.stats().build_ms;
+                high = Some(s);
+                Ok(ms)
+            },
+        ],
     )?;
-    let (escene, embree_ms) =
-        best_build(reps, || embree::Scene::build(device, &meshes, embree::Quality::Medium, false), |e| e.build_ms)?;
-    let (_, embree_high_ms) =
-        best_build(reps, || embree::Scene::build(device, &meshes, embree::Quality::High, false), |e| e.build_ms)?;
-    let (high, strahl_high_ms) = best_build(
-        reps,
-        || Ok(pool.install(|| Scene::build(meshes.clone(), &BuildConfig::high()))?),
-        |s| s.stats().build_ms,
-    )?;
+    let (Some(scene), Some(escene), Some(high)) = (scene, escene, high) else {
+        unreachable!("build_rounds runs every build at least once")
+    };
     let hs = high.stats();
     let st = scene.stats();
     let build = BuildResult {
@@ -481,19 +495,32 @@ pub fn run_scene(
     })
 }
 
-/// Builds `repeats` times (at least once): the last build and the least of `ms` over all of them.
-fn best_build<T>(
-    repeats: usize,
-    mut build: impl FnMut() -> anyhow::Result<T>,
-    ms: impl Fn(&T) -> f64,
-) -> anyhow::Result<(T, f64)> {
-    let mut last = build()?;
-    let mut best = ms(&last);
-    for _ in 1..repeats {
-        last = build()?;
-        best = best.min(ms(&last));
+/// Build rounds stop once they have taken this long in all (after the least number asked for).
+const BUILD_BUDGET: Duration = Duration::from_millis(300);
+
+/// At most this many build rounds.
+const MAX_BUILD_ROUNDS: usize = 200;
+
+/// Times `builds` (each returns its build time in ms) in interleaved rounds, as the tracing passes
+/// are: every round runs each build once, starting one build later than the round before. At
+/// least `min_rounds` rounds, then more while all rounds so far took less than [`BUILD_BUDGET`]
+/// (at most [`MAX_BUILD_ROUNDS`]): builds of microseconds are timed up to 200 times, those of
+/// seconds `min_rounds` times. Returns each build's least time.
+fn build_rounds<const N: usize>(
+    min_rounds: usize,
+    builds: [&mut dyn FnMut() -> anyhow::Result<f64>; N],
+) -> anyhow::Result<[f64; N]> {
+    let start = Instant::now();
+    let mut best = [f64::INFINITY; N];
+    let mut round = 0;
+    while round < min_rounds.max(1) || (start.elapsed() < BUILD_BUDGET && round < MAX_BUILD_ROUNDS) {
+        for k in 0..N {
+            let i = (round + k) % N;
+            best[i] = best[i].min(builds[i]()?);
+        }
+        round += 1;
     }
-    Ok((last, best))
+    Ok(best)
 }
 
 /// Runs one instanced scene (a scene file) through both engines, and through strahl flattened
@@ -509,12 +536,6 @@ fn run_instanced(
     let objects = file.load_objects()?;
     progress("building");
     let cfg = BuildConfig::default();
-    let reps = settings.build_repeats;
-    let (scene, strahl_ms) = best_build(
-        reps,
-        || Ok(pool.install(|| InstancedScene::build(objects.clone(), file.instances.clone(), &cfg))?),
-        |s| s.stats().objects_build_ms + s.stats().top_build_ms,
-    )?;
     let xfms: Vec<(usize, [f32; 12])> = file
         .instances
         .iter()
@@ -527,11 +548,27 @@ fn run_instanced(
             (i.object, c)
         })
         .collect();
-    let (escene, embree_ms) = best_build(
-        reps,
-        || embree::Scene::build_instanced(device, &objects, &xfms, embree::Quality::Medium),
-        |e| e.build_ms,
+    let (mut scene, mut escene) = (None, None);
+    let [strahl_ms, embree_ms] = build_rounds(
+        settings.build_repeats,
+        [
+            &mut || {
+                let s = pool.install(|| InstancedScene::build(objects.clone(), file.instances.clone(), &cfg))?;
+                let ms = s.stats().objects_build_ms + s.stats().top_build_ms;
+                scene = Some(s);
+                Ok(ms)
+            },
+            &mut || {
+                let e = embree::Scene::build_instanced(device, &objects, &xfms, embree::Quality::Medium)?;
+                let ms = e.build_ms;
+                escene = Some(e);
+                Ok(ms)
+            },
+        ],
     )?;
+    let (Some(scene), Some(escene)) = (scene, escene) else {
+        unreachable!("build_rounds runs every build at least once")
+    };
     let st = scene.stats().clone();
     let flat = if st.instanced_triangles <= FLATTEN_LIMIT {
         progress("flattening");

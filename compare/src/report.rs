@@ -258,7 +258,7 @@ pub fn markdown(r: &Report) -> String {
             );
         }
     }
-    let _ = writeln!(s, "\n## Build (2 threads, best of repeats)\n");
+    let _ = writeln!(s, "\n## Build (2 threads, best of interleaved rounds)\n");
     let _ = writeln!(
         s,
         "| scene | triangles | strahl ms | Embree MEDIUM ms | ratio | SAH strahl / Embree MEDIUM | strahl HIGH ms | Embree HIGH ms | HIGH ratio | SAH strahl HIGH / Embree HIGH | B/tri strahl / Embree (MEDIUM), strahl / Embree (HIGH) | nodes | leaves | depth |"
