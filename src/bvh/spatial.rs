@@ -14,6 +14,8 @@
 
 use std::sync::atomic::{AtomicIsize, Ordering};
 
+use crate::simd::f32x16;
+
 use glam::Vec3A;
 use rayon::prelude::*;
 
@@ -291,13 +293,71 @@ fn split_tri_with<const PAD: bool>(
         pad = (m * CLIP_PAD).max(Vec3A::splat(f32::MIN_POSITIVE));
         pad[axis] = 0.0;
     }
-    let fit = |b: Aabb| {
-        if b.lo.cmpgt(b.hi).any() {
-            return None;
+    (fit_within(l, pad, within), fit_within(r, pad, within))
+}
+
+/// One side `b` of a cut triangle, widened by `pad` and cut to `within`; `None` if the triangle
+/// does not reach that side (`b` empty) or the result is empty.
+#[inline(always)]
+fn fit_within(b: Aabb, pad: Vec3A, within: &Aabb) -> Option<Aabb> {
+    if b.lo.cmpgt(b.hi).any() {
+        return None;
+    }
+    intersect(&Aabb { lo: b.lo - pad, hi: b.hi + pad }, within)
+}
+
+/// Both sides of a triangle at every inner bin plane of an axis at once, one plane per vector
+/// lane (`lo + k·w` in lane `k − 1`), by the operations [`split_tri_with`] makes for one plane,
+/// lane by lane, so that the boxes are the same to the bit: per side, the box of the corners on
+/// that side and of the edges' crossing points. For a wall spanning all 16 bins, 15 cuts of 3
+/// edges with a branch each became some 90 vector operations.
+struct PlaneCuts {
+    /// Per side (left, right): low and high corner, by coordinate and lane.
+    lo: [[[f32; 16]; 3]; 2],
+    hi: [[[f32; 16]; 3]; 2],
+}
+
+impl PlaneCuts {
+    fn new(v: &[Vec3A; 3], axis: usize, lo: f32, w: f32) -> Self {
+        const _: () = assert!(SPATIAL_BINS <= 17, "one lane per inner plane");
+        let k = f32x16::from(std::array::from_fn::<f32, 16, _>(|i| (i + 1) as f32));
+        let plane = f32x16::splat(lo) + k * f32x16::splat(w);
+        let mut blo = [[f32x16::splat(f32::INFINITY); 3]; 2];
+        let mut bhi = [[f32x16::splat(f32::NEG_INFINITY); 3]; 2];
+        let mut grow = |side: usize, mask: f32x16, x: [f32x16; 3]| {
+            for c in 0..3 {
+                blo[side][c] = mask.select(blo[side][c].fast_min(x[c]), blo[side][c]);
+                bhi[side][c] = mask.select(bhi[side][c].fast_max(x[c]), bhi[side][c]);
+            }
+        };
+        for i in 0..3 {
+            let (p, q) = (v[i], v[(i + 1) % 3]);
+            let (pa, qa) = (f32x16::splat(p[axis]), f32x16::splat(q[axis]));
+            let ps = [f32x16::splat(p.x), f32x16::splat(p.y), f32x16::splat(p.z)];
+            grow(0, pa.simd_le(plane), ps);
+            grow(1, pa.simd_ge(plane), ps);
+            let cross = (pa.simd_lt(plane) & qa.simd_gt(plane)) | (pa.simd_gt(plane) & qa.simd_lt(plane));
+            if cross.to_bitmask() == 0 {
+                continue;
+            }
+            // Lanes without a crossing may divide by zero; their results are never taken.
+            let t = (plane - pa) / (qa - pa);
+            let mut x = [0usize, 1, 2].map(|c| ps[c] + (f32x16::splat(q[c]) - ps[c]) * t);
+            x[axis] = plane;
+            grow(0, cross, x);
+            grow(1, cross, x);
         }
-        intersect(&Aabb { lo: b.lo - pad, hi: b.hi + pad }, within)
-    };
-    (fit(l), fit(r))
+        Self { lo: blo.map(|s| s.map(|c| c.to_array())), hi: bhi.map(|s| s.map(|c| c.to_array())) }
+    }
+
+    /// The left and right sides' boxes at lane `k` (possibly empty).
+    fn sides(&self, k: usize) -> (Aabb, Aabb) {
+        let side = |s: usize| Aabb {
+            lo: Vec3A::new(self.lo[s][0][k], self.lo[s][1][k], self.lo[s][2][k]),
+            hi: Vec3A::new(self.hi[s][0][k], self.hi[s][1][k], self.hi[s][2][k]),
+        };
+        (side(0), side(1))
+    }
 }
 
 /// `a ∩ b`, or `None` if empty.
@@ -350,22 +410,29 @@ impl SpatialBins {
                     self.boxes[axis][b0].grow(&pb);
                     continue;
                 }
-                // Cut off one bin after another from the left.
                 let v = v.get_or_insert_with(|| corners(p.id()));
-                let mut rest = Some(pb);
-                for b in b0..b1 {
-                    let Some(cur) = rest else { break };
-                    let (l, r) = split_tri_with::<false>(v, axis, lo[axis] + (b + 1) as f32 * w[axis], &cur);
-                    if let Some(l) = l {
-                        self.boxes[axis][b].grow(&l);
-                    }
-                    rest = r;
-                }
-                if let Some(r) = rest {
-                    self.boxes[axis][b1].grow(&r);
-                }
+                self.add_cut(axis, b0, b1, &PlaneCuts::new(v, axis, lo[axis], w[axis]), &pb);
             }
         }
+    }
+
+    /// Grows bins `b0..=b1` of `axis` by the parts of a reference with box `pb` that `cuts`
+    /// give, cutting off one bin after another from the left: each bin gets the part left of its
+    /// right plane within what is left of the reference.
+    fn add_cut(&mut self, axis: usize, b0: usize, b1: usize, cuts: &PlaneCuts, pb: &Aabb) {
+        let mut rest = *pb;
+        for b in b0..b1 {
+            // Plane `b + 1` is lane `b`.
+            let (l, r) = cuts.sides(b);
+            if let Some(l) = fit_within(l, Vec3A::ZERO, &rest) {
+                self.boxes[axis][b].grow(&l);
+            }
+            match fit_within(r, Vec3A::ZERO, &rest) {
+                Some(r) => rest = r,
+                None => return,
+            }
+        }
+        self.boxes[axis][b1].grow(&rest);
     }
 }
 
@@ -477,6 +544,53 @@ fn halve(mut prims: Vec<PrimRef>) -> (Set, Set) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn all_planes_at_once_bin_like_one_plane_after_another() {
+        // Triangles with corners anywhere or on bin planes (planes at whole numbers), whole or
+        // already clipped references: every bin box equal to the bit to cutting off one bin
+        // after another with `split_tri_with`.
+        let mut rng = crate::raygen::Pcg32::new(11, 4);
+        let mut r = || rng.next_f32();
+        let (lo, w) = (Vec3A::ZERO, Vec3A::ONE);
+        for case in 0..2000 {
+            let corner = |r: &mut dyn FnMut() -> f32| {
+                let c = Vec3A::new(r(), r(), r()) * SPATIAL_BINS as f32;
+                if case % 3 == 0 { c.floor() } else { c }
+            };
+            let v = [corner(&mut r), corner(&mut r), corner(&mut r)];
+            let full = Aabb { lo: v[0].min(v[1]).min(v[2]), hi: v[0].max(v[1]).max(v[2]) };
+            let shrink = if case % 2 == 0 { 0.0 } else { 0.3 * r() };
+            let pb = Aabb { lo: full.lo + (full.hi - full.lo) * shrink, hi: full.hi - (full.hi - full.lo) * shrink };
+            let mut bins = SpatialBins::new();
+            bins.add(&[PrimRef::new(pb, 0)], lo, w, &|_| v);
+            for axis in 0..3 {
+                let bin = |x: f32| (((x - lo[axis]) / w[axis]) as usize).min(SPATIAL_BINS - 1);
+                let (b0, b1) = (bin(pb.lo[axis]), bin(pb.hi[axis]).max(bin(pb.lo[axis])));
+                let mut want = [Aabb::EMPTY; SPATIAL_BINS];
+                if b0 == b1 {
+                    want[b0] = pb;
+                } else {
+                    let mut rest = Some(pb);
+                    for b in b0..b1 {
+                        let Some(cur) = rest else { break };
+                        let (l, r) = split_tri_with::<false>(&v, axis, lo[axis] + (b + 1) as f32 * w[axis], &cur);
+                        if let Some(l) = l {
+                            want[b] = l;
+                        }
+                        rest = r;
+                    }
+                    if let Some(r) = rest {
+                        want[b1] = r;
+                    }
+                }
+                let bits = |b: &Aabb| (b.lo.to_array().map(f32::to_bits), b.hi.to_array().map(f32::to_bits));
+                for b in 0..SPATIAL_BINS {
+                    assert_eq!(bits(&bins.boxes[axis][b]), bits(&want[b]), "case {case}, axis {axis}, bin {b}");
+                }
+            }
+        }
+    }
 
     #[test]
     fn split_parts_cover_the_triangle() {
