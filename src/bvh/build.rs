@@ -96,6 +96,7 @@ impl BuildConfig {
 
 /// Most bins per axis (fixed-size bin arrays on the stack).
 pub const MAX_BINS: usize = 32;
+const _: () = assert!(MAX_BINS.is_power_of_two(), "bin indices are masked with MAX_BINS − 1");
 
 /// How many bins a set of `n` references is binned into (at most [`BuildConfig::bins`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -419,6 +420,13 @@ fn bin_of(p: &PrimRef, offset: Vec3A, scale: Vec3A, last: Vec3A) -> [i32; 4] {
     trunc4(((p.center2() - offset) * scale).clamp(Vec3A::ZERO, last).extend(0.0).to_array())
 }
 
+/// A bin index from [`bin_of`] (in `0..bins`), masked into `0..MAX_BINS` so that indexing needs
+/// no bounds check.
+#[inline(always)]
+fn bin_index(b: i32) -> usize {
+    b as usize & (MAX_BINS - 1)
+}
+
 /// Sets of at least this many references are binned in runs ([`bin_runs`]) when their first
 /// [`RUN_SAMPLE`] references change bins fewer than [`RUN_CHANGES`] times over the three axes.
 const RUN_MIN: usize = 4096;
@@ -453,7 +461,7 @@ fn bin_into(bins: &mut Bins, prims: &[PrimRef], offset: Vec3A, scale: Vec3A) {
         let (b0, b1) = (bin_of(&pair[0], offset, scale, last), bin_of(&pair[1], offset, scale, last));
         let (p0, p1) = (pair[0].bounds(), pair[1].bounds());
         for a in 0..3 {
-            let (i, j) = (b0[a] as usize, b1[a] as usize);
+            let (i, j) = (bin_index(b0[a]), bin_index(b1[a]));
             bins.boxes[0][i][a].grow(&p0);
             bins.counts[0][i][a] += 1;
             bins.boxes[1][j][a].grow(&p1);
@@ -464,7 +472,7 @@ fn bin_into(bins: &mut Bins, prims: &[PrimRef], offset: Vec3A, scale: Vec3A) {
         let b = bin_of(p, offset, scale, last);
         let pb = p.bounds();
         for a in 0..3 {
-            let i = b[a] as usize;
+            let i = bin_index(b[a]);
             bins.boxes[0][i][a].grow(&pb);
             bins.counts[0][i][a] += 1;
         }
@@ -476,14 +484,14 @@ fn bin_into(bins: &mut Bins, prims: &[PrimRef], offset: Vec3A, scale: Vec3A) {
 fn bin_runs(bins: &mut Bins, prims: &[PrimRef], offset: Vec3A, scale: Vec3A, last: Vec3A) {
     let Some(first) = prims.first() else { return };
     let b = bin_of(first, offset, scale, last);
-    let mut cur = [b[0] as usize, b[1] as usize, b[2] as usize];
+    let mut cur = [bin_index(b[0]), bin_index(b[1]), bin_index(b[2])];
     let mut acc = [Aabb::EMPTY; 3];
     let mut cnt = [0u32; 3];
     for p in prims {
         let b = bin_of(p, offset, scale, last);
         let pb = p.bounds();
         for a in 0..3 {
-            let i = b[a] as usize;
+            let i = bin_index(b[a]);
             if i == cur[a] {
                 acc[a].grow(&pb);
                 cnt[a] += 1;
