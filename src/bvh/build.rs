@@ -106,12 +106,15 @@ pub(super) enum BinRule {
     /// Embree's `4 + n/20`, with its bin mapping: the second tree of small builds
     /// ([`SMALL_BUILD`]).
     Coarse,
+    /// The fine rule's bin count with Embree's bin mapping, which moves every bin boundary: the
+    /// second tree of small HIGH builds (`spatial::TWO_HIGH_TREES`).
+    Shifted,
 }
 
 impl BinRule {
     fn bins(self, n: usize, max: usize) -> usize {
         match self {
-            BinRule::Fine => (4 + n / 8).max((n / 2).min(16)),
+            BinRule::Fine | BinRule::Shifted => (4 + n / 8).max((n / 2).min(16)),
             BinRule::Coarse => 4 + n / 20,
         }
         .min(max.max(4))
@@ -122,7 +125,7 @@ impl BinRule {
     fn mapping(self) -> f32 {
         match self {
             BinRule::Fine => 0.99999,
-            BinRule::Coarse => 0.99,
+            BinRule::Coarse | BinRule::Shifted => 0.99,
         }
     }
 }
