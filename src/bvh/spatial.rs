@@ -281,8 +281,8 @@ fn split_tri(v: &[Vec3A; 3], axis: usize, plane: f32, within: &Aabb) -> (Option<
     split_tri_with::<true>(v, axis, plane, within)
 }
 
-/// [`split_tri`], padded (`PAD`, for references) or not (for binning, which only estimates
-/// costs).
+/// [`split_tri`], padded (`PAD`, for references) or not: the unpadded cut is what spatial
+/// binning computes for all planes at once ([`PlaneCuts`]), and its tests' reference.
 #[inline(always)]
 fn split_tri_with<const PAD: bool>(
     v: &[Vec3A; 3],
