@@ -1,8 +1,10 @@
 //! Diagnostic: what one single-ray call costs in each engine, on one thread, for rays that miss
 //! the scene's box (almost nothing but the call: set-up, one node test, the answer) and for rays
-//! from the middle of the scene in random directions.
+//! from the middle of the scene in random directions; with a scene file's camera, also for its
+//! primary, shadow and diffuse rays (`primary|shadow|diffuse`: rounds of both engines alternated,
+//! each round's strahl/Embree time ratio, so that the machine's drift cancels out of A/B runs).
 //!
-//! `cargo run --release -p compare --example call_cost -- scene.toml [miss|inside]`
+//! `cargo run --release -p compare --example call_cost -- scene.toml [miss|inside|primary|shadow|diffuse] [rounds]`
 //! (`BOX=fast` builds strahl with the fast box test.) The figures are for finding per-call costs;
 //! throughput claims come from the harness (`compare`), which traces the same rays on 2 threads.
 use std::time::Instant;
@@ -16,14 +18,20 @@ fn main() -> anyhow::Result<()> {
     strahl::simd::set_flush_denormals();
     let mut args = std::env::args().skip(1);
     let path = args.next().unwrap_or_else(|| "data/forest.toml".into());
-    let inside = args.next().is_some_and(|m| m == "inside");
+    let mode = args.next().unwrap_or_default();
+    let inside = mode == "inside";
     let mut cfg = BuildConfig::default();
     if std::env::var("BOX").is_ok_and(|v| v == "fast") {
         cfg.box_test = strahl::BoxTest::Fast;
     }
-    let scene = SceneFile::read(&path)?.build(&cfg)?.flatten(&cfg)?;
+    let file = SceneFile::read(&path)?;
+    let scene = file.build(&cfg)?.flatten(&cfg)?;
     let device = embree::Device::new("")?;
     let escene = embree::Scene::build(&device, scene.meshes(), Quality::Medium, false)?;
+    if matches!(mode.as_str(), "primary" | "shadow" | "diffuse") {
+        let rounds = args.next().and_then(|r| r.parse().ok()).unwrap_or(15);
+        return camera_rays(&file, &scene, &escene, &mode, rounds);
+    }
     let (lo, hi) = scene.bounds().ok_or_else(|| anyhow::anyhow!("empty scene"))?;
     let (c, size) = ((lo + hi) * 0.5, (hi - lo).max_element());
     let n = 1 << 20;
@@ -62,5 +70,83 @@ fn main() -> anyhow::Result<()> {
         let embree_ns = t.elapsed().as_secs_f64() * 1e9 / n as f64;
         println!("strahl {strahl_ns:.1} ns per call ({hits} hits), Embree {embree_ns:.1} ns per call ({ehits} hits)");
     }
+    Ok(())
+}
+
+/// Alternated rounds of both engines' single-ray APIs over one class of a scene file's camera
+/// rays (the harness's classes, 1024×1024): per round the time of each, and the median ratio.
+fn camera_rays(
+    file: &SceneFile,
+    scene: &strahl::Scene,
+    escene: &embree::Scene,
+    mode: &str,
+    rounds: usize,
+) -> anyhow::Result<()> {
+    use strahl::{Coherence, HitStream, raygen};
+    let cam = file.camera.as_ref().ok_or_else(|| anyhow::anyhow!("no camera"))?.camera();
+    let (primary, _) = raygen::primary(&cam, 1024, 1024);
+    let mut hits = HitStream::default();
+    scene.intersect_stream(&primary, &mut hits, Coherence::Coherent);
+    let diag = scene.bounds().map(|(lo, hi)| (hi - lo).length()).unwrap_or(1.0);
+    let rays = match mode {
+        "diffuse" => raygen::diffuse(&primary, &hits, 1, 1e-4 * diag).0,
+        "shadow" => {
+            let light = file.lights.first().map(|l| l.position).unwrap_or(cam.eye + Vec3::Y);
+            raygen::shadow_with(&primary, &hits, light, raygen::Offset::Normal).0
+        }
+        _ => primary,
+    };
+    let any = mode == "shadow";
+    let n = rays.len();
+    let strahl_pass = || {
+        let t = Instant::now();
+        let mut hits = 0;
+        for i in 0..n {
+            let r = rays.get(i);
+            hits += if any { scene.occluded(&r) } else { scene.intersect(&r).is_some() } as usize;
+        }
+        (t.elapsed().as_secs_f64(), hits)
+    };
+    let embree_pass = || {
+        let t = Instant::now();
+        let mut hits = 0;
+        for i in 0..n {
+            if any {
+                let mut r = embree_ray(&rays, i);
+                escene.occluded1(&mut r, false);
+                hits += (r.tfar == f32::NEG_INFINITY) as usize;
+            } else {
+                let mut rh = RTCRayHit { ray: embree_ray(&rays, i), hit: empty_hit() };
+                escene.intersect1(&mut rh, false);
+                hits += (rh.hit.geomID != RTC_INVALID_GEOMETRY_ID) as usize;
+            }
+        }
+        (t.elapsed().as_secs_f64(), hits)
+    };
+    let (mut ratios, mut best) = (Vec::new(), (f64::INFINITY, f64::INFINITY));
+    for round in 0..rounds {
+        let (s, e) = if round % 2 == 0 {
+            let s = strahl_pass();
+            (s, embree_pass())
+        } else {
+            let e = embree_pass();
+            (strahl_pass(), e)
+        };
+        if s.1 != e.1 {
+            println!("round {round}: {} strahl hits, {} Embree hits", s.1, e.1);
+        }
+        ratios.push(e.0 / s.0);
+        best = (best.0.min(s.0), best.1.min(e.0));
+    }
+    ratios.sort_by(f64::total_cmp);
+    println!(
+        "{mode}: {n} rays, 1 thread, {rounds} alternated rounds: strahl {:.2}, Embree {:.2} Mrays/s (best); \
+         speed ratio strahl/Embree median {:.3} (quartiles {:.3}-{:.3})",
+        n as f64 / best.0 / 1e6,
+        n as f64 / best.1 / 1e6,
+        ratios[rounds / 2],
+        ratios[rounds / 4],
+        ratios[3 * rounds / 4]
+    );
     Ok(())
 }

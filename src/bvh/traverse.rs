@@ -359,15 +359,17 @@ pub(super) fn order_children<const ANY: bool>(
         return child[i0];
     }
     if ANY {
-        // Any hit: push all but the first, in slot order, and descend into the first.
-        mask = rest;
+        // Any hit: push all but the last in slot order and descend into the last, as Embree's
+        // any-hit walk and the per-lane packet walks here do (PERFORMANCE.md: shadow rays).
         let d = d.to_array();
+        let last = 31 - mask.leading_zeros() as usize;
+        mask &= !(1 << last);
         while mask != 0 {
             let i = mask.trailing_zeros() as usize;
             mask &= mask - 1;
             stack.put(sp, child[i], d[i]);
         }
-        return child[i0];
+        return child[last];
     }
     let dd = d.to_array();
     // Two: descend into the nearer, push the farther.
