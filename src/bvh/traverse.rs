@@ -653,7 +653,7 @@ impl Bvh {
         let br = BoxRay::with_terms(terms, ray.tnear);
         let mut tfar = ray.tfar;
         let mut best = None;
-        walk1::<ANY, CONS>(&self.nodes, self.prefetch, &br, stack, base, &mut tfar, |leaf, tfar, _| {
+        walk1::<ANY, CONS>(self.tree(), &br, stack, base, &mut tfar, |leaf, tfar, _| {
             let (start, count) = leaf_blocks(leaf);
             for bi in start..start + count {
                 if let Some((lane, t, u, v)) = K::intersect1(&self.blocks[bi], &r4, &pre, ray.tnear, *tfar) {
@@ -712,31 +712,23 @@ impl Bvh {
         };
         let base = stack.push_root(root);
         let rk = RayK { o: pb.o, d: pb.d, tnear: pb.tnear };
-        walk_packet::<ANY, CONS>(
-            &self.nodes,
-            self.prefetch,
-            &pb,
-            stack,
-            base,
-            &mut tfar,
-            |leaf, lanes, tfar, stack| {
-                if lanes != 0 {
-                    // A few lanes walk this subtree one at a time.
-                    out.mask |= each_lane_alone::<ANY, _>(
-                        p,
-                        lanes,
-                        tfar,
-                        |l, ray| {
-                            let h = self.trace1_from_terms::<ANY, K, CONS>(ray, pb.slabs.lane(l), leaf, stack)?;
-                            Some((h.t, h))
-                        },
-                        |l, h| out.set(l, &self.hit_record(&h)),
-                    );
-                    return ANY && out.mask == pb.live;
-                }
-                self.leaf_packet::<ANY, K>(leaf, &rk, pb.tnear, pb.live, tfar, out)
-            },
-        );
+        walk_packet::<ANY, CONS>(self.tree(), &pb, stack, base, &mut tfar, |leaf, lanes, tfar, stack| {
+            if lanes != 0 {
+                // A few lanes walk this subtree one at a time.
+                out.mask |= each_lane_alone::<ANY, _>(
+                    p,
+                    lanes,
+                    tfar,
+                    |l, ray| {
+                        let h = self.trace1_from_terms::<ANY, K, CONS>(ray, pb.slabs.lane(l), leaf, stack)?;
+                        Some((h.t, h))
+                    },
+                    |l, h| out.set(l, &self.hit_record(&h)),
+                );
+                return ANY && out.mask == pb.live;
+            }
+            self.leaf_packet::<ANY, K>(leaf, &rk, pb.tnear, pb.live, tfar, out)
+        });
     }
 
     /// Tests the blocks of `leaf` against the open lanes of a packet (`tnear ≤ tfar`): lowers the
@@ -887,20 +879,39 @@ impl BoxRay {
     }
 }
 
+/// What a walk reads: the nodes, the triangle blocks their leaves reference (empty for the
+/// instance level, whose leaves are instances), and whether the tree is out of the cache
+/// (`far_memory`: the walk then prefetches the children it enters).
+#[derive(Clone, Copy)]
+pub(crate) struct Tree<'a> {
+    pub nodes: &'a [Node],
+    pub blocks: &'a [TriBlock],
+    pub far_memory: bool,
+}
+
+impl Bvh {
+    /// This tree as the walks read it.
+    #[inline(always)]
+    pub(crate) fn tree(&self) -> Tree<'_> {
+        Tree { nodes: &self.nodes, blocks: &self.blocks, far_memory: self.prefetch }
+    }
+}
+
 /// The ordered depth-first walk of one ray over `nodes`, from the entries on `stack`; with
-/// `far_memory` (a tree out of the cache) it prefetches the inner children it enters.
+/// `far_memory` (a tree out of the cache) it prefetches the children it enters: nodes, and the
+/// first triangle block of leaves (`blocks`; empty for the instance level).
 /// `leaf(reference, tfar)` tests one leaf, may lower `tfar`, and returns true to end the walk (an
 /// any-hit query found its hit). Shared by triangle BVHs and the instance level above them.
 #[inline(always)]
 pub(crate) fn walk1<const ANY: bool, const CONS: bool>(
-    nodes: &[Node],
-    far_memory: bool,
+    tree: Tree<'_>,
     br: &BoxRay,
     stack: &mut Stack,
     base: usize,
     tfar: &mut f32,
     mut leaf: impl FnMut(u32, &mut f32, &mut Stack) -> bool,
 ) {
+    let Tree { nodes, blocks, far_memory } = tree;
     let mut sp = stack.len;
     'pop: while sp > base {
         let (mut cur, dist) = stack.take(&mut sp);
@@ -924,7 +935,7 @@ pub(crate) fn walk1<const ANY: bool, const CONS: bool>(
                 continue 'pop;
             }
             if far_memory {
-                prefetch_inner(nodes, &node.child, mask);
+                prefetch_children(nodes, blocks, &node.child, mask);
             }
             cur = order_children::<ANY>(stack, &mut sp, &node.child, mask, tn);
         }
@@ -932,18 +943,21 @@ pub(crate) fn walk1<const ANY: bool, const CONS: bool>(
     stack.len = base;
 }
 
-/// Prefetches the nodes of the inner children in `mask`: what the walks do on trees that outgrow
-/// the cache (`far_memory`), as Embree's walks always do. On trees in the cache it cost 3%
+/// Prefetches the children in `mask`: the node of an inner child, the first block of a leaf
+/// (from `blocks`, if it holds it). What the walks do on trees that outgrow the cache
+/// (`far_memory`), as Embree's walks always do. On trees in the cache it cost 3%
 /// (PERFORMANCE.md).
 #[inline(always)]
-fn prefetch_inner(nodes: &[Node], child: &[u32; WIDTH], mut mask: u32) {
+fn prefetch_children(nodes: &[Node], blocks: &[TriBlock], child: &[u32; WIDTH], mut mask: u32) {
     while mask != 0 {
         let i = mask.trailing_zeros() as usize;
         mask &= mask - 1;
-        if !is_leaf(child[i])
-            && let Some(n) = nodes.get(child[i] as usize)
-        {
-            prefetch(n);
+        if !is_leaf(child[i]) {
+            if let Some(n) = nodes.get(child[i] as usize) {
+                prefetch(n);
+            }
+        } else if let Some(b) = blocks.get(leaf_blocks(child[i]).0) {
+            prefetch(b);
         }
     }
 }
@@ -1119,20 +1133,20 @@ const SINGLE_SWITCH: u32 = 4;
 
 /// The ordered depth-first walk of a packet over `nodes`: children tested with the frustum if
 /// the packet has one, per lane otherwise, and entered if any lane enters them; with
-/// `far_memory`, the inner children entered are prefetched.
+/// `far_memory`, the children entered are prefetched (nodes, and the first block of leaves).
 /// `leaf(reference, lanes, tfar, stack)` is called with `lanes == 0` to test a leaf for the whole
 /// packet, and with the few `lanes` that entered a subtree (a node or a leaf) to walk it one ray
 /// at a time; it may lower the lanes' `tfar` and returns true to end the walk.
 #[inline(always)]
 pub(crate) fn walk_packet<const ANY: bool, const CONS: bool>(
-    nodes: &[Node],
-    far_memory: bool,
+    tree: Tree<'_>,
     pb: &PacketBoxes,
     stack: &mut Stack,
     base: usize,
     tfar: &mut Pf,
     mut leaf: impl FnMut(u32, u32, &mut Pf, &mut Stack) -> bool,
 ) {
+    let Tree { nodes, blocks, far_memory } = tree;
     let mut tfar_max = hmax(*tfar);
     // Camera packets (with a frustum) never switch to single rays; their entries' lane masks are
     // not kept.
@@ -1204,7 +1218,7 @@ pub(crate) fn walk_packet<const ANY: bool, const CONS: bool>(
                     continue 'pop;
                 }
                 if far_memory {
-                    prefetch_inner(nodes, &node.child, mask);
+                    prefetch_children(nodes, blocks, &node.child, mask);
                 }
                 cur = order_children::<ANY>(stack, &mut sp, &child, mask, Nf::new(d));
                 lanes = 0;
@@ -1222,8 +1236,12 @@ pub(crate) fn walk_packet<const ANY: bool, const CONS: bool>(
                 }
                 let (m, tn) = pb.enter::<CONS>([b[0][i], b[2][i], b[4][i]], [b[1][i], b[3][i], b[5][i]], *tfar);
                 if m != 0 {
-                    if far_memory && !is_leaf(c) {
-                        prefetch(&nodes[c as usize]);
+                    if far_memory {
+                        if !is_leaf(c) {
+                            prefetch(&nodes[c as usize]);
+                        } else if let Some(b) = blocks.get(leaf_blocks(c).0) {
+                            prefetch(b);
+                        }
                     }
                     hit_child[n] = if is_leaf(c) { c } else { c | LANE_MODE };
                     hit_dist[n] = hmin(tn);
