@@ -106,6 +106,13 @@ pub struct InstancedScene {
 const INSTANCES_PER_LEAF: usize = 1;
 
 impl InstancedScene {
+    /// The instance level as the walks read it: its leaves are instances (no triangle blocks),
+    /// and it is not prefetched: an instance tree stays in the cache.
+    #[inline(always)]
+    fn instance_tree(&self) -> Tree<'_> {
+        Tree { nodes: &self.nodes, blocks: &[], far_memory: false }
+    }
+
     /// Builds one BVH per object (each a list of meshes), then the top level over `instances`,
     /// all with `config` on the current rayon pool. Geometry ids in hits are indices into the
     /// object's meshes; instance ids are indices into `instances`.
@@ -337,34 +344,25 @@ impl InstancedScene {
         let mut tfar = ray.tfar;
         let mut best = None;
         let base = stack.push_root(root);
-        // No prefetching above the objects: an instance tree stays in the cache.
-        walk1::<ANY, CONS>(
-            Tree { nodes: &self.nodes, blocks: &[], far_memory: false },
-            &br,
-            stack,
-            base,
-            &mut tfar,
-            |leaf, tfar, stack| {
-                let (start, count) = leaf_blocks(leaf);
-                for k in start..start + count {
-                    let p = &self.placed[k];
-                    let r = object_ray(&p.to_object, ray, *tfar);
-                    // Finite in, finite out, except where a huge scale overflows: such rays miss.
-                    if !(r.origin.is_finite() && r.dir.is_finite()) {
-                        continue;
-                    }
-                    if let Some(h) = self.objects[p.object as usize].bvh().trace1_with::<ANY, false, K, CONS>(&r, stack)
-                    {
-                        *tfar = h.t;
-                        best = Some((k as u32, h));
-                        if ANY {
-                            return true;
-                        }
+        walk1::<ANY, CONS>(self.instance_tree(), &br, stack, base, &mut tfar, |leaf, tfar, stack| {
+            let (start, count) = leaf_blocks(leaf);
+            for k in start..start + count {
+                let p = &self.placed[k];
+                let r = object_ray(&p.to_object, ray, *tfar);
+                // Finite in, finite out, except where a huge scale overflows: such rays miss.
+                if !(r.origin.is_finite() && r.dir.is_finite()) {
+                    continue;
+                }
+                if let Some(h) = self.objects[p.object as usize].bvh().trace1_with::<ANY, false, K, CONS>(&r, stack) {
+                    *tfar = h.t;
+                    best = Some((k as u32, h));
+                    if ANY {
+                        return true;
                     }
                 }
-                false
-            },
-        );
+            }
+            false
+        });
         best
     }
 
@@ -395,78 +393,70 @@ impl InstancedScene {
         let spread = if !ANY && pb.frustum.is_none() { pb.origin_extent() } else { 0.0 };
         // One object's hits, before they are turned to world space.
         let mut r = HitPacket::default();
-        // No prefetching above the objects: an instance tree stays in the cache.
-        walk_packet::<ANY, CONS>(
-            Tree { nodes: &self.nodes, blocks: &[], far_memory: false },
-            &pb,
-            stack,
-            base,
-            &mut tfar,
-            |leaf, lanes, tfar, stack| {
-                if lanes != 0 {
-                    // A few lanes walk this part of the instance tree one at a time.
-                    out.mask |= each_lane_alone::<ANY, _>(
-                        p,
-                        lanes,
+        walk_packet::<ANY, CONS>(self.instance_tree(), &pb, stack, base, &mut tfar, |leaf, lanes, tfar, stack| {
+            if lanes != 0 {
+                // A few lanes walk this part of the instance tree one at a time.
+                out.mask |= each_lane_alone::<ANY, _>(
+                    p,
+                    lanes,
+                    tfar,
+                    |l, ray| {
+                        let (k, h) = self.trace1_from_terms::<ANY, K, CONS>(ray, pb.slabs.lane(l), leaf, stack)?;
+                        Some((h.t, (k, h)))
+                    },
+                    |l, (k, h)| out.set(l, &self.world_hit(k, &self.object_hit(k, &h))),
+                );
+                return ANY && out.mask == pb.live;
+            }
+            let (start, count) = leaf_blocks(leaf);
+            for k in start..start + count {
+                let pl = &self.placed[k];
+                // Only the lanes that enter this instance's box go into the object.
+                let active = pb.lanes_in_box::<CONS>(pl.lo, pl.hi, *tfar) & pb.live;
+                if active == 0 {
+                    continue;
+                }
+                let (q, [qo, qd]) = object_packet(&pl.to_object, &pb, *tfar, p, active);
+                let bvh = self.objects[pl.object as usize].bvh();
+                if !ANY && pb.frustum.is_none() && !packet_walks_object(active, spread, pl) {
+                    // Incoherent closest-hit rays: each lane that enters the instance walks the
+                    // object alone, as Embree's instances hand their lanes to the object's hybrid
+                    // walk, which takes single rays for so few lanes. Diffuse packets run 10–15%
+                    // faster this way than through the object's packet walk; occlusion packets lost
+                    // 13% on the forest, so they keep it (PERFORMANCE.md). Many lanes from nearby
+                    // origins take the object's packet walk instead (`packet_walks_object`). The
+                    // lanes' slab terms are computed here, 16 at a time.
+                    let qs = LaneSlabs::of(&qo, &qd);
+                    out.mask |= each_lane_alone::<false, _>(
+                        &q,
+                        active,
                         tfar,
                         |l, ray| {
-                            let (k, h) = self.trace1_from_terms::<ANY, K, CONS>(ray, pb.slabs.lane(l), leaf, stack)?;
-                            Some((h.t, (k, h)))
+                            let h = bvh.trace1_from_terms::<false, K, CONS>(ray, qs.lane(l), bvh.root, stack)?;
+                            Some((h.t, h))
                         },
-                        |l, (k, h)| out.set(l, &self.world_hit(k, &self.object_hit(k, &h))),
+                        |l, h| out.set(l, &self.world_hit(k as u32, &bvh.hit_record(&h))),
                     );
-                    return ANY && out.mask == pb.live;
+                    continue;
                 }
-                let (start, count) = leaf_blocks(leaf);
-                for k in start..start + count {
-                    let pl = &self.placed[k];
-                    // Only the lanes that enter this instance's box go into the object.
-                    let active = pb.lanes_in_box::<CONS>(pl.lo, pl.hi, *tfar) & pb.live;
-                    if active == 0 {
-                        continue;
-                    }
-                    let (q, [qo, qd]) = object_packet(&pl.to_object, &pb, *tfar, p, active);
-                    let bvh = self.objects[pl.object as usize].bvh();
-                    if !ANY && pb.frustum.is_none() && !packet_walks_object(active, spread, pl) {
-                        // Incoherent closest-hit rays: each lane that enters the instance walks the
-                        // object alone, as Embree's instances hand their lanes to the object's hybrid
-                        // walk, which takes single rays for so few lanes. Diffuse packets run 10–15%
-                        // faster this way than through the object's packet walk; occlusion packets lost
-                        // 13% on the forest, so they keep it (PERFORMANCE.md). Many lanes from nearby
-                        // origins take the object's packet walk instead (`packet_walks_object`). The
-                        // lanes' slab terms are computed here, 16 at a time.
-                        let qs = LaneSlabs::of(&qo, &qd);
-                        out.mask |= each_lane_alone::<false, _>(
-                            &q,
-                            active,
-                            tfar,
-                            |l, ray| {
-                                let h = bvh.trace1_from_terms::<false, K, CONS>(ray, qs.lane(l), bvh.root, stack)?;
-                                Some((h.t, h))
-                            },
-                            |l, h| out.set(l, &self.world_hit(k as u32, &bvh.hit_record(&h))),
-                        );
-                        continue;
-                    }
-                    let mask = bvh.trace_packet_with::<ANY, K, CONS>(&q, &mut r, stack);
-                    if mask == 0 {
-                        continue;
-                    }
-                    let valid = lane_mask(mask);
-                    out.mask |= mask;
-                    if ANY {
-                        *tfar = valid.select(Pf::splat(f32::NEG_INFINITY), *tfar);
-                        if out.mask == pb.live {
-                            return true;
-                        }
-                    } else {
-                        *tfar = valid.select(Pf::new(r.t), *tfar);
-                        out.take_instanced(valid, &r, &pl.normal_to_world, pl.id);
-                    }
+                let mask = bvh.trace_packet_with::<ANY, K, CONS>(&q, &mut r, stack);
+                if mask == 0 {
+                    continue;
                 }
-                false
-            },
-        );
+                let valid = lane_mask(mask);
+                out.mask |= mask;
+                if ANY {
+                    *tfar = valid.select(Pf::splat(f32::NEG_INFINITY), *tfar);
+                    if out.mask == pb.live {
+                        return true;
+                    }
+                } else {
+                    *tfar = valid.select(Pf::new(r.t), *tfar);
+                    out.take_instanced(valid, &r, &pl.normal_to_world, pl.id);
+                }
+            }
+            false
+        });
         out.mask
     }
 
