@@ -23,6 +23,8 @@ pub enum Error {
     RaggedIndices { len: usize },
     #[error("triangle {triangle} refers to vertex {index}, but the mesh has {vertex_count} vertices")]
     IndexOutOfRange { triangle: usize, index: u32, vertex_count: usize },
+    #[error("vertex {vertex} has a coordinate of magnitude {value:e}; at most {max:e} (2^40) is supported")]
+    CoordinateOutOfRange { vertex: usize, value: f32, max: f32 },
     #[error("mesh has {0} triangles; at most 2^32 - 1 are supported")]
     TooManyTriangles(usize),
     #[error("scene file {path}: {message}")]

@@ -279,6 +279,7 @@ impl InstancedScene {
         if !ray.is_valid() {
             return None;
         }
+        let ray = &ray.from_zero();
         let mut best: Option<Hit> = None;
         for (i, inst) in self.instances.iter().enumerate() {
             let to_object = inst.transform.inverse();
@@ -316,7 +317,7 @@ impl InstancedScene {
         if !ray.is_valid() {
             return None;
         }
-        self.trace1_from::<ANY, K, CONS>(&ray, self.root, stack)
+        self.trace1_from::<ANY, K, CONS>(&ray.from_zero(), self.root, stack)
     }
 
     /// [`trace1_with`](Self::trace1_with) over the instance subtree at `root`.
@@ -416,7 +417,7 @@ impl InstancedScene {
                 if active == 0 {
                     continue;
                 }
-                let (q, [qo, qd]) = object_packet(&pl.to_object, &pb, *tfar, p, active);
+                let (q, [qo, qd]) = object_packet(&pl.to_object, &pb, *tfar, active);
                 let bvh = self.objects[pl.object as usize].bvh();
                 if !ANY && pb.frustum.is_none() && !packet_walks_object(active, spread, pl) {
                     // Incoherent closest-hit rays: each lane that enters the instance walks the
@@ -516,13 +517,7 @@ fn object_ray(to_object: &Affine3A, ray: &Ray, tfar: f32) -> Ray {
 /// The lanes `active` of a packet in object space, with their current `tfar`, and the moved
 /// origins and directions as vectors.
 #[inline(always)]
-fn object_packet(
-    to_object: &Affine3A,
-    pb: &PacketBoxes,
-    tfar: Pf,
-    p: &RayPacket,
-    active: u32,
-) -> (RayPacket, [[Pf; 3]; 2]) {
+fn object_packet(to_object: &Affine3A, pb: &PacketBoxes, tfar: Pf, active: u32) -> (RayPacket, [[Pf; 3]; 2]) {
     let m = to_object.matrix3;
     let tr = to_object.translation;
     // The operations and their order of glam's `transform_point3` / `transform_vector3` (no fused
@@ -540,7 +535,7 @@ fn object_packet(
         dx: d[0].to_array(),
         dy: d[1].to_array(),
         dz: d[2].to_array(),
-        tnear: p.tnear,
+        tnear: pb.tnear.to_array(),
         tfar: tfar.to_array(),
         active,
     };

@@ -1,8 +1,10 @@
 //! Rays and hits: one ray, an SoA packet of [`PACKET_WIDTH`] rays with an active-lane mask, and a
 //! stream of any length in SoA form.
 //!
-//! A ray is the segment `origin + t·dir` for `tnear < t <= tfar` (the depth test of Embree's
-//! default triangle test). `dir` need not be normalized: `t` is measured in units of `dir`, so it
+//! A ray is the segment `origin + t·dir` for `max(tnear, 0) < t <= tfar` (the depth test of
+//! Embree's default triangle test). A negative `tnear` counts as 0 in every query and in brute
+//! force alike: no query reaches behind a ray's origin (Embree's valid rays start at `tnear ≥ 0`
+//! too; a half-supported negative range lost hits, RELIABILITY.md). `dir` need not be normalized: `t` is measured in units of `dir`, so it
 //! stays the same when a ray is transformed into another space (the seeds' instancing slides).
 
 use glam::Vec3;
@@ -14,7 +16,7 @@ pub use crate::simd::PACKET_WIDTH;
 pub struct Ray {
     pub origin: Vec3,
     pub dir: Vec3,
-    /// Start of the segment (exclusive).
+    /// Start of the segment (exclusive); negative values count as 0.
     pub tnear: f32,
     /// End of the segment (inclusive); `f32::INFINITY` for an unbounded ray.
     pub tfar: f32,
@@ -48,6 +50,14 @@ impl Ray {
             tnear: ld(&self.tnear),
             tfar: ld(&self.tfar),
         }
+    }
+
+    /// This ray with a negative `tnear` raised to `+0.0`: the interval every query traces (call
+    /// after [`is_valid`](Self::is_valid), which rejects a NaN `tnear`).
+    #[inline(always)]
+    pub(crate) fn from_zero(mut self) -> Ray {
+        self.tnear = self.tnear.max(0.0) + 0.0;
+        self
     }
 
     /// Whether the ray can hit anything. Rays with a NaN or infinite origin or direction, a zero

@@ -56,6 +56,14 @@ impl BoxTest {
 /// Direction components smaller than this in magnitude are clamped before taking reciprocals.
 const MIN_RCP_INPUT: f32 = 1e-18;
 
+/// Largest magnitude of a ray's `origin · rd` term. Beyond it (origins far out with small
+/// direction components: `|o| · |1/d|` past `f32::MAX` would overflow to infinity, and `inf − inf`
+/// in a slab test is NaN, which let rays enter empty child slots) the term saturates: the slab
+/// distances of boxes near the scene, whatever their sign, are then beyond `1e37` in magnitude,
+/// where no hit of a ray this far out can lie anyway (RELIABILITY.md). Finite terms keep every
+/// node test free of NaN.
+const MAX_OD: f32 = 1e37;
+
 /// Relative widening of the far plane distance: 16 ulps, well above the 2–3 roundings involved.
 const WIDEN: f32 = 1.0 / (1u32 << 20) as f32;
 
@@ -581,6 +589,7 @@ impl Bvh {
         if !ray.is_valid() {
             return None;
         }
+        let ray = &ray.from_zero();
         let r4 = Ray4::new(ray.origin, ray.dir);
         let pre = K::pre(&r4);
         let mut tfar = ray.tfar;
@@ -619,7 +628,7 @@ impl Bvh {
         if CHECK && !ray.is_valid() {
             return None;
         }
-        self.trace1_from::<ANY, K, CONS>(&ray, self.root, stack)
+        self.trace1_from::<ANY, K, CONS>(&ray.from_zero(), self.root, stack)
     }
 
     /// [`trace1_with`](Self::trace1_with) over the subtree at `root` (a node or a leaf): the
@@ -813,7 +822,7 @@ impl SlabTerms {
     #[inline(always)]
     pub(crate) fn of(ray: &Ray) -> Self {
         let rd = Vec3::new(safe_rcp(ray.dir.x), safe_rcp(ray.dir.y), safe_rcp(ray.dir.z));
-        let od = ray.origin * rd;
+        let od = (ray.origin * rd).clamp(Vec3::splat(-MAX_OD), Vec3::splat(MAX_OD));
         Self::from_parts(rd, od, WIDEN * od.abs().max_element())
     }
 
@@ -1003,7 +1012,8 @@ impl PacketBoxes {
         }
         let slabs = LaneSlabs::of(&o, &d);
         let live_mask = lane_mask(live);
-        let tnear = live_mask.select(tn, inf);
+        // No query reaches behind a ray's origin (`Ray::from_zero`).
+        let tnear = live_mask.select(tn.fast_max(Pf::splat(0.0)), inf);
         let tfar = live_mask.select(tf, Pf::splat(f32::NEG_INFINITY));
         // `-0.0 + 0.0` is `+0.0`; lanes out of the query hold `+inf`.
         let int_ok = tnear.simd_ge(Pf::splat(0.0)).to_bitmask() == low_bits(PACKET_WIDTH);
@@ -1033,7 +1043,8 @@ impl LaneSlabs {
             Pf::splat(1.0) / small.select(Pf::splat(MIN_RCP_INPUT).copysign(x), x)
         };
         let rd = [rcp(d[0]), rcp(d[1]), rcp(d[2])];
-        let od = [o[0] * rd[0], o[1] * rd[1], o[2] * rd[2]];
+        let sat = |x: Pf| x.fast_max(Pf::splat(-MAX_OD)).fast_min(Pf::splat(MAX_OD));
+        let od = [sat(o[0] * rd[0]), sat(o[1] * rd[1]), sat(o[2] * rd[2])];
         let pad = od[0].abs().fast_max(od[1].abs()).fast_max(od[2].abs()) * Pf::splat(WIDEN);
         Self { rd, od, pad }
     }
@@ -1109,7 +1120,7 @@ pub(crate) fn each_lane_alone<const ANY: bool, H>(
     while bits != 0 {
         let l = bits.trailing_zeros() as usize;
         bits &= bits - 1;
-        if let Some((th, h)) = walk(l, &Ray { tfar: t[l], ..p.get(l) }) {
+        if let Some((th, h)) = walk(l, &Ray { tfar: t[l], ..p.get(l) }.from_zero()) {
             hits |= 1 << l;
             if ANY {
                 t[l] = f32::NEG_INFINITY;
@@ -1304,8 +1315,13 @@ mod tests {
             Vec3::new(-3.0e5, 7.0e-3, -0.25),
             Vec3::new(1.0, 1.0, -1.0),
         ];
-        let origins =
-            [Vec3::ZERO, Vec3::new(1e6, -3.5e4, 0.125), Vec3::new(-2.0, 7.5, -1e-20), Vec3::new(3e30, -1.0, 4.0)];
+        let origins = [
+            Vec3::ZERO,
+            Vec3::new(1e6, -3.5e4, 0.125),
+            Vec3::new(-2.0, 7.5, -1e-20),
+            Vec3::new(3e30, -1.0, 4.0),
+            Vec3::new(0.0, 0.0, -1e21),
+        ];
         let rays: Vec<Ray> = dirs.iter().flat_map(|&d| origins.iter().map(move |&o| Ray::new(o, d))).collect();
         for chunk in rays.chunks(PACKET_WIDTH) {
             let lane = |f: fn(&Ray) -> f32| Pf::new(std::array::from_fn(|l| chunk.get(l).map_or(1.0, f)));

@@ -4,11 +4,20 @@ use glam::{Affine3A, Vec3};
 
 use crate::error::{Error, Result};
 
+/// Largest magnitude of a finite vertex coordinate, 2^40 (about 1.1e12). The triangle tests'
+/// products are of third degree in coordinates (Möller–Trumbore's `t·det` is `(e2 × e1) · (v0 − o)`),
+/// so triangles of size 1e13 and up overflow float32 (`f32::MAX` ≈ 3.4e38) for any ray and are
+/// never hit — by Embree's test too. Below this bound every product stays finite for ray origins
+/// within the same bound and directions up to about 1e12 in length (RELIABILITY.md).
+pub const MAX_COORDINATE: f32 = (1u64 << 40) as f32;
+
 /// An indexed triangle mesh: one geometry of a scene.
 ///
-/// Indices are checked against the vertex count when the mesh is made. Vertices may hold NaN or
-/// infinity, and triangles may be degenerate: such triangles are kept (so primitive ids match the
-/// input) but the BVH builder leaves them out, and they are never hit — the same answer Embree gives.
+/// Indices are checked against the vertex count when the mesh is made, and finite coordinates
+/// against [`MAX_COORDINATE`]. Vertices may hold NaN or infinity, and triangles may be degenerate:
+/// such triangles are kept (so primitive ids match the input) but the BVH builder leaves them out,
+/// and they are never hit — the same answer Embree gives. So are triangles moved beyond
+/// [`MAX_COORDINATE`] later ([`map_positions`](Self::map_positions)).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct TriangleMesh {
     pub name: String,
@@ -16,11 +25,22 @@ pub struct TriangleMesh {
     indices: Vec<[u32; 3]>,
 }
 
+/// Whether a vertex is accepted by [`TriangleMesh::new`]: each coordinate NaN, infinite, or finite
+/// within [`MAX_COORDINATE`].
+fn in_range(p: Vec3) -> bool {
+    p.to_array().iter().all(|x| !x.is_finite() || x.abs() <= MAX_COORDINATE)
+}
+
 impl TriangleMesh {
-    /// Makes a mesh, checking that every index refers to a vertex.
+    /// Makes a mesh, checking that every index refers to a vertex and that no finite coordinate
+    /// exceeds [`MAX_COORDINATE`] in magnitude.
     pub fn new(name: impl Into<String>, positions: Vec<Vec3>, indices: Vec<[u32; 3]>) -> Result<Self> {
         if indices.len() >= u32::MAX as usize {
             return Err(Error::TooManyTriangles(indices.len()));
+        }
+        if let Some((vertex, p)) = positions.iter().enumerate().find(|(_, p)| !in_range(**p)) {
+            let value = p.to_array().into_iter().filter(|x| x.is_finite()).fold(0.0f32, |a, x| a.max(x.abs()));
+            return Err(Error::CoordinateOutOfRange { vertex, value, max: MAX_COORDINATE });
         }
         for (triangle, tri) in indices.iter().enumerate() {
             for &index in tri {
@@ -63,10 +83,12 @@ impl TriangleMesh {
         [self.positions[a as usize], self.positions[b as usize], self.positions[c as usize]]
     }
 
-    /// Whether triangle `i` can ever be hit: finite corners and a non-zero geometric normal.
+    /// Whether triangle `i` can ever be hit: finite corners within [`MAX_COORDINATE`] and a
+    /// non-zero geometric normal.
     pub fn is_hittable(&self, i: usize) -> bool {
         let [a, b, c] = self.triangle(i);
-        a.is_finite() && b.is_finite() && c.is_finite() && (b - a).cross(c - a) != Vec3::ZERO
+        let inside = |p: Vec3| p.is_finite() && p.abs().max_element() <= MAX_COORDINATE;
+        inside(a) && inside(b) && inside(c) && (b - a).cross(c - a) != Vec3::ZERO
     }
 
     /// Applies `f` to every vertex (used to move or scale a mesh in tests and generated scenes).

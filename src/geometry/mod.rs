@@ -8,6 +8,6 @@ pub mod obj;
 pub mod triangle;
 pub(crate) mod watertight;
 
-pub use mesh::TriangleMesh;
+pub use mesh::{MAX_COORDINATE, TriangleMesh};
 pub use obj::load_obj;
 pub use triangle::{TriangleTest, exact_hit, intersect_triangle};

@@ -4,7 +4,7 @@
 //! dot products fused as Embree's `vec3.h` writes them, so that hits agree with Embree's default
 //! scenes.
 
-use super::triangle::{BLOCK, Kernel, Ray4, RayK, TriBlock, cross, dot, nearest};
+use super::triangle::{BLOCK, Kernel, Ray4, RayK, TriBlock, cross, dot, nearest, sane};
 use crate::simd::*;
 
 pub(crate) struct Moller;
@@ -42,8 +42,7 @@ impl Kernel for Moller {
         }
         let inv = f32x4::splat(1.0) / abs_den;
         let t = tt * inv;
-        // A tiny determinant can overflow t (directions near 1e-38): such a hit is no hit.
-        nearest(valid & t.simd_lt(f32x4::splat(f32::INFINITY)), t, u * inv, v * inv)
+        nearest(valid & sane(inv, t, f32x4::splat(tnear)), t, u * inv, v * inv)
     }
 
     #[inline(always)]
@@ -68,6 +67,6 @@ impl Kernel for Moller {
         let valid = valid & (abs_den * r.tnear).simd_lt(tt) & tt.simd_le(abs_den * tfar);
         let inv = Pf::splat(1.0) / abs_den;
         let t = tt * inv;
-        (valid & t.simd_lt(Pf::splat(f32::INFINITY)), t, u * inv, v * inv)
+        (valid & sane(inv, t, r.tnear), t, u * inv, v * inv)
     }
 }

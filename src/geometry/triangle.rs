@@ -170,6 +170,37 @@ pub(crate) trait Kernel {
     fn intersect_packet(b: &TriBlock, lane: usize, r: &RayK, tfar: Pf, active: Pf) -> (Pf, Pf, Pf, Pf);
 }
 
+/// The last checks of a hit whose depth test passed in its scaled form (`tnear·|den| < t·|den|`):
+/// the reciprocal `inv` of the determinant is finite (a determinant near 1e-38 would make the
+/// barycentrics `u·inv` infinite or NaN), and `t = t_scaled·inv` is finite and still above
+/// `tnear` once divided (a huge determinant — directions near 1e34 — rounds a tiny `t` to 0, a hit
+/// outside the interval `(tnear, tfar]`).
+#[inline(always)]
+pub(crate) fn sane<V: SaneLanes>(inv: V, t: V, tnear: V) -> V {
+    V::sane(inv, t, tnear)
+}
+
+/// [`sane`] for the block (4 lanes) and packet (16 lanes) forms.
+pub(crate) trait SaneLanes: Copy {
+    fn sane(inv: Self, t: Self, tnear: Self) -> Self;
+}
+
+impl SaneLanes for f32x4 {
+    #[inline(always)]
+    fn sane(inv: Self, t: Self, tnear: Self) -> Self {
+        let inf = f32x4::splat(f32::INFINITY);
+        inv.abs().simd_lt(inf) & t.simd_lt(inf) & tnear.simd_lt(t)
+    }
+}
+
+impl SaneLanes for Pf {
+    #[inline(always)]
+    fn sane(inv: Self, t: Self, tnear: Self) -> Self {
+        let inf = Pf::splat(f32::INFINITY);
+        inv.abs().simd_lt(inf) & t.simd_lt(inf) & tnear.simd_lt(t)
+    }
+}
+
 /// Picks the nearest valid lane of a block test: `(lane, t, u, v)`.
 #[inline(always)]
 pub(crate) fn nearest(valid: f32x4, t: f32x4, u: f32x4, v: f32x4) -> Option<(usize, f32, f32, f32)> {

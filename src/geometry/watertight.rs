@@ -9,7 +9,7 @@
 
 use glam::Vec3;
 
-use super::triangle::{Kernel, Ray4, RayK, TriBlock, nearest};
+use super::triangle::{Kernel, Ray4, RayK, TriBlock, nearest, sane};
 use crate::simd::*;
 
 /// Per-ray shear: axis permutation `(kx, ky, kz)` and `(Sx, Sy, Sz)`.
@@ -102,7 +102,7 @@ impl Kernel for Watertight {
         }
         let inv = f32x4::splat(1.0) / det;
         let t = t_s / abs_det;
-        nearest(valid & t.simd_lt(f32x4::splat(f32::INFINITY)), t, v * inv, w * inv)
+        nearest(valid & sane(inv, t, f32x4::splat(tnear)), t, v * inv, w * inv)
     }
 
     /// All lanes at once: each lane's axis permutation and shear are selected by mask, so the
@@ -156,6 +156,6 @@ impl Kernel for Watertight {
         let valid = valid & (abs_det * r.tnear).simd_lt(t_s) & t_s.simd_le(abs_det * tfar);
         let inv = Pf::splat(1.0) / det;
         let t = t_s / abs_det;
-        (valid & t.simd_lt(Pf::splat(f32::INFINITY)), t, v * inv, w * inv)
+        (valid & sane(inv, t, r.tnear), t, v * inv, w * inv)
     }
 }
