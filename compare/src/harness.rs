@@ -13,7 +13,8 @@ use strahl::{
 };
 
 use crate::accuracy::{self, Accuracy};
-use crate::embree::{self, RTC_INVALID_GEOMETRY_ID, RTCHit, RTCHit16, RTCRay, RTCRay16, RTCRayHit, RTCRayHit16};
+use crate::embree::{self, RTC_INVALID_GEOMETRY_ID, RTCHit, RTCRay, RTCRayHit};
+use crate::kernel::{EmbreeNative, StrahlNative};
 use crate::scenes::SceneSpec;
 
 /// Rays per parallel work item for the single and packet APIs, and Embree's stream chunk.
@@ -68,6 +69,45 @@ impl Api {
             Api::Stream => "stream",
         }
     }
+}
+
+/// How a timed call is fed (BENCHMARKING.md, issue 28).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Mode {
+    /// Each engine traces from its own native input layout, prepared before the timed region;
+    /// only the query calls are timed (`kernel.rs`). The headline.
+    Kernel,
+    /// Both engines fed from the same SoA ray stream inside the timed region, each in the best
+    /// way its API allows, answers read into the same arrays: what a caller pays.
+    AsCalled,
+}
+
+impl Mode {
+    pub const ALL: [Mode; 2] = [Mode::Kernel, Mode::AsCalled];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Mode::Kernel => "kernel",
+            Mode::AsCalled => "as_called",
+        }
+    }
+}
+
+/// Quartiles of a set of values: `[q1, median, q3]` (NaN if empty).
+pub fn quartiles(v: &[f64]) -> [f64; 3] {
+    let mut s: Vec<f64> = v.iter().copied().filter(|x| !x.is_nan()).collect();
+    if s.is_empty() {
+        return [f64::NAN; 3];
+    }
+    s.sort_by(f64::total_cmp);
+    // Linear interpolation between order statistics.
+    let q = |p: f64| {
+        let x = p * (s.len() - 1) as f64;
+        let (i, f) = (x.floor() as usize, x.fract());
+        if i + 1 < s.len() { s[i] * (1.0 - f) + s[i + 1] * f } else { s[i] }
+    };
+    [q(0.25), q(0.5), q(0.75)]
 }
 
 /// Per-ray answers of one engine: `t` (+inf for a miss; 0 for an occluded shadow ray) and ids
@@ -127,7 +167,7 @@ impl Answers {
         (self.inst[i], self.geom[i], self.prim[i])
     }
 
-    fn set(&mut self, i: usize, (t, g, p, n): (f32, u32, u32, u32)) {
+    pub(crate) fn set(&mut self, i: usize, (t, g, p, n): (f32, u32, u32, u32)) {
         (self.t[i], self.geom[i], self.prim[i], self.inst[i]) = (t, g, p, n);
     }
 
@@ -172,8 +212,9 @@ pub struct ClassResult {
     pub rays: usize,
     pub hit_rate: f64,
     pub accuracy: Accuracy,
-    /// `[engine][api]`, engine 0 = strahl, 1 = Embree.
-    pub samples: [[Samples; 3]; 2],
+    /// `[mode][engine][api]` (mode as in [`Mode::ALL`]; engine 0 = strahl, 1 = Embree): pass `k`
+    /// of every list was timed in the same interleaved round.
+    pub samples: [[[Samples; 3]; 2]; 2],
     /// Whether each engine's packet and stream answers equal its single-ray answers.
     pub strahl_apis_consistent: f64,
     pub embree_apis_consistent: f64,
@@ -182,23 +223,54 @@ pub struct ClassResult {
 }
 
 impl ClassResult {
+    /// Kernel-mode Mrays/s (the headline), best or median pass.
     pub fn mrays(&self, engine: usize, api: Api, median: bool) -> f64 {
-        let s = &self.samples[engine][api as usize];
+        self.mrays_in(Mode::Kernel, engine, api, median)
+    }
+
+    pub fn mrays_in(&self, mode: Mode, engine: usize, api: Api, median: bool) -> f64 {
+        let s = &self.samples[mode as usize][engine][api as usize];
         let secs = if median { s.median() } else { s.best() };
         if secs > 0.0 && secs.is_finite() { self.rays as f64 / secs / 1e6 } else { 0.0 }
     }
 
-    /// The fastest API of an engine by best time, with its Mrays/s.
+    /// The fastest kernel-mode API of an engine by best time, with its Mrays/s.
     pub fn best(&self, engine: usize) -> (Api, f64) {
+        self.best_in(Mode::Kernel, engine)
+    }
+
+    pub fn best_in(&self, mode: Mode, engine: usize) -> (Api, f64) {
         Api::ALL
             .iter()
-            .map(|&a| (a, self.mrays(engine, a, false)))
+            .map(|&a| (a, self.mrays_in(mode, engine, a, false)))
             .fold((Api::Single, 0.0), |b, x| if x.1 > b.1 { x } else { b })
     }
 
+    /// Kernel-mode best-vs-best ratio (strahl's best API's best pass over Embree's).
     pub fn best_ratio(&self) -> f64 {
-        let (e, s) = (self.best(1).1, self.best(0).1);
+        self.best_ratio_in(Mode::Kernel)
+    }
+
+    pub fn best_ratio_in(&self, mode: Mode) -> f64 {
+        let (e, s) = (self.best_in(mode, 1).1, self.best_in(mode, 0).1);
         if e > 0.0 { s / e } else { 0.0 }
+    }
+
+    /// Speed ratios strahl/Embree of the interleaved pass pairs of one API.
+    pub fn pair_ratios(&self, mode: Mode, api: Api) -> Vec<f64> {
+        let m = &self.samples[mode as usize];
+        let (s, e) = (&m[0][api as usize].seconds, &m[1][api as usize].seconds);
+        s.iter().zip(e).map(|(s, e)| e / s).collect()
+    }
+
+    /// Best-vs-best speed ratios of the interleaved passes: in each pass, each engine's fastest
+    /// API against the other's.
+    pub fn best_pair_ratios(&self, mode: Mode) -> Vec<f64> {
+        let m = &self.samples[mode as usize];
+        let passes = m[0][0].seconds.len();
+        let fastest =
+            |e: usize, k: usize| Api::ALL.iter().map(|&a| m[e][a as usize].seconds[k]).fold(f64::INFINITY, f64::min);
+        (0..passes).map(|k| fastest(1, k) / fastest(0, k)).collect()
     }
 }
 
@@ -381,7 +453,7 @@ pub struct Settings {
 
 impl Default for Settings {
     fn default() -> Self {
-        Self { width: 1024, passes: 5, seed: 1, build_repeats: 5, keep_rays: false }
+        Self { width: 1024, passes: 7, seed: 1, build_repeats: 5, keep_rays: false }
     }
 }
 
@@ -727,7 +799,9 @@ pub fn flat_agreement(a: &Answers, f: &Answers, geom_offsets: &[u32]) -> FlatAgr
     }
 }
 
-/// Traces one ray set through all APIs of both engines, interleaved, and diffs the answers.
+/// Traces one ray set through all APIs of both engines in both modes, interleaved pass by pass
+/// (each pass: kernel mode, then as-called; in each, per API, the engines in alternating order),
+/// and diffs the answers (those of kernel mode, read back after each timed call).
 fn run_class<Q: Query>(
     scene: &Q,
     escene: &embree::Scene,
@@ -738,49 +812,57 @@ fn run_class<Q: Query>(
     settings: &Settings,
 ) -> (ClassResult, Answers, Answers) {
     let n = rays.len();
-    let mut samples: [[Samples; 3]; 2] = Default::default();
+    let mut samples: [[[Samples; 3]; 2]; 2] = Default::default();
     let mut answers: [[Answers; 3]; 2] = std::array::from_fn(|_| std::array::from_fn(|_| Answers::misses(n)));
-    let pristine = embree_stream_rays(rays);
-    let mut work_rh: Vec<RTCRayHit> = Vec::new();
-    let mut work_r: Vec<RTCRay> = Vec::new();
+    // Native inputs of kernel mode, and the as-called mode's answer arrays and Embree's stream
+    // records (allocated here, filled in the timed region), all prepared before any timing.
+    let mut sn = StrahlNative::new(rays);
+    let mut en = EmbreeNative::new(rays);
+    let mut scratch = Answers::misses(n);
+    let mut work_rh = vec![RTCRayHit::default(); if class.occlusion() { 0 } else { n }];
+    let mut work_r = vec![RTCRay::default(); if class.occlusion() { n } else { 0 }];
     let mut hits = HitStream::default();
     let mut occ = Vec::new();
     for pass in 0..=settings.passes {
-        for api in Api::ALL {
-            // Alternate which engine goes first, so neither always runs on a warmer cache.
-            let order = if pass % 2 == 0 { [0, 1] } else { [1, 0] };
-            for engine in order {
-                // Fresh inputs before every pass; copying is not timed.
-                if engine == 1 && api == Api::Stream {
-                    if class.occlusion() {
-                        work_r.clear();
-                        work_r.extend(pristine.iter().map(|rh| rh.ray));
-                    } else {
-                        work_rh.clear();
-                        work_rh.extend_from_slice(&pristine);
+        for mode in Mode::ALL {
+            for api in Api::ALL {
+                // Alternate which engine goes first, so neither always runs on a warmer cache.
+                let order = if pass % 2 == 0 { [0, 1] } else { [1, 0] };
+                for engine in order {
+                    if mode == Mode::Kernel && engine == 1 {
+                        en.refresh(class, api as usize);
                     }
-                }
-                let out = &mut answers[engine][api as usize];
-                let start = Instant::now();
-                pool.install(|| match (engine, api) {
-                    (0, Api::Single) => strahl_single(scene, rays, class, out),
-                    (0, Api::Packet) => strahl_packet(scene, rays, class, out),
-                    (0, Api::Stream) => strahl_stream(scene, rays, class, &mut hits, &mut occ),
-                    (_, Api::Single) => embree_single(escene, rays, class, out),
-                    (_, Api::Packet) => embree_packet(escene, rays, class, out),
-                    (_, Api::Stream) => embree_stream(escene, class, &mut work_rh, &mut work_r),
-                });
-                let secs = start.elapsed().as_secs_f64();
-                if pass > 0 {
-                    samples[engine][api as usize].seconds.push(secs);
-                }
-                // Collect stream answers (not timed).
-                if api == Api::Stream {
-                    let out = &mut answers[engine][api as usize];
-                    if engine == 0 {
-                        collect_strahl(class, &hits, &occ, out);
-                    } else {
-                        collect_embree(class, &work_rh, &work_r, out);
+                    let start = Instant::now();
+                    pool.install(|| match (mode, engine, api) {
+                        (Mode::Kernel, 0, Api::Single) => sn.single(scene, class),
+                        (Mode::Kernel, 0, Api::Packet) => sn.packet(scene, class),
+                        (Mode::Kernel, 0, Api::Stream) => sn.stream(scene, class),
+                        (Mode::Kernel, _, Api::Single) => en.single(escene, class),
+                        (Mode::Kernel, _, Api::Packet) => en.packet(escene, class),
+                        (Mode::Kernel, _, Api::Stream) => en.stream(escene, class),
+                        (Mode::AsCalled, 0, Api::Single) => strahl_single(scene, rays, class, &mut scratch),
+                        (Mode::AsCalled, 0, Api::Packet) => strahl_packet(scene, rays, class, &mut scratch),
+                        (Mode::AsCalled, 0, Api::Stream) => {
+                            strahl_stream_as_called(scene, rays, class, &mut hits, &mut occ, &mut scratch)
+                        }
+                        (Mode::AsCalled, _, Api::Single) => embree_single(escene, rays, class, &mut scratch),
+                        (Mode::AsCalled, _, Api::Packet) => embree_packet(escene, rays, class, &mut scratch),
+                        (Mode::AsCalled, _, Api::Stream) => {
+                            embree_stream_as_called(escene, rays, class, &mut work_rh, &mut work_r, &mut scratch)
+                        }
+                    });
+                    let secs = start.elapsed().as_secs_f64();
+                    if pass > 0 {
+                        samples[mode as usize][engine][api as usize].seconds.push(secs);
+                    }
+                    // Read kernel mode's answers back (not timed).
+                    if mode == Mode::Kernel && (pass == 0 || pass == settings.passes) {
+                        let out = &mut answers[engine][api as usize];
+                        if engine == 0 {
+                            sn.answers(class, api as usize, out);
+                        } else {
+                            en.answers(class, api as usize, out);
+                        }
                     }
                 }
             }
@@ -810,7 +892,7 @@ fn run_class<Q: Query>(
     (result, s_single, e_single)
 }
 
-fn coherence(class: Class) -> Coherence {
+pub(crate) fn coherence(class: Class) -> Coherence {
     if class.coherent() { Coherence::Coherent } else { Coherence::Incoherent }
 }
 
@@ -818,15 +900,15 @@ fn coherence(class: Class) -> Coherence {
 const MISS: (f32, u32, u32, u32) = (f32::INFINITY, INVALID_ID, INVALID_ID, INVALID_ID);
 const OCCLUDED: (f32, u32, u32, u32) = (0.0, 0, 0, INVALID_ID);
 
-fn occlusion_answer(o: bool) -> (f32, u32, u32, u32) {
+pub(crate) fn occlusion_answer(o: bool) -> (f32, u32, u32, u32) {
     if o { OCCLUDED } else { MISS }
 }
 
-fn hit_answer(h: Option<strahl::Hit>) -> (f32, u32, u32, u32) {
+pub(crate) fn hit_answer(h: Option<strahl::Hit>) -> (f32, u32, u32, u32) {
     h.map_or(MISS, |h| (h.t, h.geom_id, h.prim_id, h.inst_id))
 }
 
-fn embree_answer(t: f32, geom: u32, prim: u32, inst: u32) -> (f32, u32, u32, u32) {
+pub(crate) fn embree_answer(t: f32, geom: u32, prim: u32, inst: u32) -> (f32, u32, u32, u32) {
     if geom != RTC_INVALID_GEOMETRY_ID { (t, geom, prim, inst) } else { MISS }
 }
 
@@ -872,25 +954,25 @@ fn strahl_stream<Q: Query>(scene: &Q, rays: &RayStream, class: Class, hits: &mut
     }
 }
 
-fn collect_strahl(class: Class, hits: &HitStream, occ: &[bool], out: &mut Answers) {
-    for i in 0..out.len() {
-        out.set(i, if class.occlusion() { occlusion_answer(occ[i]) } else { hit_answer(hits.get(i)) });
-    }
-}
-
-/// Ray `i` of `rays` as Embree's single-ray struct (mask all ones, id `i`).
+/// Ray `i` of `rays` as Embree's single-ray struct (mask all ones, id `i`), under strahl's rules
+/// for bad rays, which Embree's own checks would abort on (`ray.valid()`): a negative `tnear`
+/// counts as 0, and a ray strahl calls invalid (NaN or infinite fields, a zero direction,
+/// `tnear > tfar`) becomes an empty interval at the origin, which misses and is not occluded.
 #[inline]
 pub fn embree_ray(rays: &RayStream, i: usize) -> RTCRay {
+    let r = rays.get(i);
+    let (o, d, tnear, tfar) =
+        if r.is_valid() { (r.origin, r.dir, r.tnear.max(0.0), r.tfar) } else { (Vec3::ZERO, Vec3::Z, 0.0, 0.0) };
     RTCRay {
-        org_x: rays.ox[i],
-        org_y: rays.oy[i],
-        org_z: rays.oz[i],
-        tnear: rays.tnear[i],
-        dir_x: rays.dx[i],
-        dir_y: rays.dy[i],
-        dir_z: rays.dz[i],
+        org_x: o.x,
+        org_y: o.y,
+        org_z: o.z,
+        tnear,
+        dir_x: d.x,
+        dir_y: d.y,
+        dir_z: d.z,
         time: 0.0,
-        tfar: rays.tfar[i],
+        tfar,
         mask: u32::MAX,
         id: i as u32,
         flags: 0,
@@ -907,77 +989,72 @@ pub fn empty_hit() -> RTCHit {
     }
 }
 
-fn embree_stream_rays(rays: &RayStream) -> Vec<RTCRayHit> {
-    (0..rays.len()).map(|i| RTCRayHit { ray: embree_ray(rays, i), hit: empty_hit() }).collect()
-}
-
+/// Embree's single-ray API fed from the SoA stream as a caller would, in the best way its API
+/// allows: each run of 16 rays is converted into a small array of records first and traced
+/// after, so that `rtcIntersect1`'s wide loads never wait on the stores that just wrote the
+/// record (a record built field by field right before each call cost Embree up to a third of its
+/// speed: issue 28).
 pub(crate) fn embree_single(scene: &embree::Scene, rays: &RayStream, class: Class, out: &mut Answers) {
     let coherent = class.coherent();
     out.par_fill(|start, o| {
-        for k in 0..o.len() {
-            if class.occlusion() {
-                let mut r = embree_ray(rays, start + k);
-                scene.occluded1(&mut r, coherent);
-                o.set(k, occlusion_answer(r.tfar == f32::NEG_INFINITY));
-            } else {
-                let mut rh = RTCRayHit { ray: embree_ray(rays, start + k), hit: empty_hit() };
-                scene.intersect1(&mut rh, coherent);
-                o.set(k, embree_answer(rh.ray.tfar, rh.hit.geomID, rh.hit.primID, rh.hit.instID[0]));
+        let mut rh = [RTCRayHit::default(); 16];
+        for k in (0..o.len()).step_by(16) {
+            let m = (o.len() - k).min(16);
+            for (l, x) in rh[..m].iter_mut().enumerate() {
+                *x = RTCRayHit { ray: embree_ray(rays, start + k + l), hit: empty_hit() };
+            }
+            for (l, x) in rh[..m].iter_mut().enumerate() {
+                if class.occlusion() {
+                    scene.occluded1(&mut x.ray, coherent);
+                    o.set(k + l, occlusion_answer(x.ray.tfar == f32::NEG_INFINITY));
+                } else {
+                    scene.intersect1(x, coherent);
+                    o.set(k + l, embree_answer(x.ray.tfar, x.hit.geomID, x.hit.primID, x.hit.instID[0]));
+                }
             }
         }
     });
 }
 
+/// Embree's 16-ray API fed from the SoA stream as a caller would: each field copied into the
+/// packet 16 floats at a time (as `RayStream::packet` fills strahl's), then strahl's rules for
+/// bad rays applied lane by lane (see [`embree_ray`]).
 pub(crate) fn embree_packet(scene: &embree::Scene, rays: &RayStream, class: Class, out: &mut Answers) {
     let coherent = class.coherent();
     out.par_fill(|start, o| {
-        let mut rh = Box::new(RTCRayHit16 {
-            ray: RTCRay16 {
-                org_x: [0.0; 16],
-                org_y: [0.0; 16],
-                org_z: [0.0; 16],
-                tnear: [0.0; 16],
-                dir_x: [0.0; 16],
-                dir_y: [0.0; 16],
-                dir_z: [0.0; 16],
-                time: [0.0; 16],
-                tfar: [0.0; 16],
-                mask: [u32::MAX; 16],
-                id: [0; 16],
-                flags: [0; 16],
-            },
-            hit: RTCHit16 {
-                Ng_x: [0.0; 16],
-                Ng_y: [0.0; 16],
-                Ng_z: [0.0; 16],
-                u: [0.0; 16],
-                v: [0.0; 16],
-                primID: [RTC_INVALID_GEOMETRY_ID; 16],
-                geomID: [RTC_INVALID_GEOMETRY_ID; 16],
-                instID: [[RTC_INVALID_GEOMETRY_ID; 16]],
-            },
-        });
+        let mut rh = Box::new(crate::kernel::empty_packet());
         for k in (0..o.len()).step_by(16) {
             let m = (o.len() - k).min(16);
-            let mut valid = [0i32; 16];
+            let i = start + k;
             let r = &mut rh.ray;
-            for l in 0..m {
-                let i = start + k + l;
-                valid[l] = -1;
-                r.org_x[l] = rays.ox[i];
-                r.org_y[l] = rays.oy[i];
-                r.org_z[l] = rays.oz[i];
-                r.tnear[l] = rays.tnear[i];
-                r.dir_x[l] = rays.dx[i];
-                r.dir_y[l] = rays.dy[i];
-                r.dir_z[l] = rays.dz[i];
-                r.tfar[l] = rays.tfar[i];
-                r.id[l] = i as u32;
+            r.org_x[..m].copy_from_slice(&rays.ox[i..i + m]);
+            r.org_y[..m].copy_from_slice(&rays.oy[i..i + m]);
+            r.org_z[..m].copy_from_slice(&rays.oz[i..i + m]);
+            r.tnear[..m].copy_from_slice(&rays.tnear[i..i + m]);
+            r.dir_x[..m].copy_from_slice(&rays.dx[i..i + m]);
+            r.dir_y[..m].copy_from_slice(&rays.dy[i..i + m]);
+            r.dir_z[..m].copy_from_slice(&rays.dz[i..i + m]);
+            r.tfar[..m].copy_from_slice(&rays.tfar[i..i + m]);
+            let valid: [i32; 16] = std::array::from_fn(|l| {
+                let ok = l < m && {
+                    let f = |x: f32| x.is_finite();
+                    let d = [r.dir_x[l], r.dir_y[l], r.dir_z[l]];
+                    f(r.org_x[l])
+                        && f(r.org_y[l])
+                        && f(r.org_z[l])
+                        && d.iter().all(|&x| f(x))
+                        && d.iter().any(|x| x.abs() >= strahl::ray::MIN_DIRECTION)
+                        && r.tnear[l] <= r.tfar[l]
+                };
+                -(ok as i32)
+            });
+            for t in &mut r.tnear {
+                *t = t.max(0.0);
             }
             if class.occlusion() {
                 scene.occluded16(&valid, &mut rh.ray, coherent);
                 for l in 0..m {
-                    o.set(k + l, occlusion_answer(rh.ray.tfar[l] == f32::NEG_INFINITY));
+                    o.set(k + l, occlusion_answer(valid[l] != 0 && rh.ray.tfar[l] == f32::NEG_INFINITY));
                 }
             } else {
                 rh.hit.geomID = [RTC_INVALID_GEOMETRY_ID; 16];
@@ -992,26 +1069,72 @@ pub(crate) fn embree_packet(scene: &embree::Scene, rays: &RayStream, class: Clas
     });
 }
 
+/// Embree's stream API fed from the SoA stream as a caller would: the records converted into
+/// `rh` / `r` (allocated by the caller beforehand, `rays.len()` long) chunk by chunk in parallel,
+/// traced, and the answers read into `out` in parallel.
+fn embree_stream_as_called(
+    scene: &embree::Scene,
+    rays: &RayStream,
+    class: Class,
+    rh: &mut [RTCRayHit],
+    r: &mut [RTCRay],
+    out: &mut Answers,
+) {
+    if class.occlusion() {
+        r.par_chunks_mut(CHUNK).enumerate().with_max_len(1).for_each(|(c, ch)| {
+            for (k, x) in ch.iter_mut().enumerate() {
+                *x = embree_ray(rays, c * CHUNK + k);
+            }
+        });
+    } else {
+        rh.par_chunks_mut(CHUNK).enumerate().with_max_len(1).for_each(|(c, ch)| {
+            for (k, x) in ch.iter_mut().enumerate() {
+                *x = RTCRayHit { ray: embree_ray(rays, c * CHUNK + k), hit: empty_hit() };
+            }
+        });
+    }
+    embree_stream(scene, class, rh, r);
+    let (rh, r) = (&*rh, &*r);
+    out.par_fill(|start, o| {
+        for k in 0..o.len() {
+            let i = start + k;
+            o.set(
+                k,
+                if class.occlusion() {
+                    occlusion_answer(r[i].tfar == f32::NEG_INFINITY)
+                } else {
+                    embree_answer(rh[i].ray.tfar, rh[i].hit.geomID, rh[i].hit.primID, rh[i].hit.instID[0])
+                },
+            );
+        }
+    });
+}
+
+/// strahl's stream API fed from the caller's SoA stream, its answers read into `out` in parallel.
+fn strahl_stream_as_called<Q: Query>(
+    scene: &Q,
+    rays: &RayStream,
+    class: Class,
+    hits: &mut HitStream,
+    occ: &mut Vec<bool>,
+    out: &mut Answers,
+) {
+    strahl_stream(scene, rays, class, hits, occ);
+    let (hits, occ) = (&*hits, &*occ);
+    out.par_fill(|start, o| {
+        for k in 0..o.len() {
+            let i = start + k;
+            o.set(k, if class.occlusion() { occlusion_answer(occ[i]) } else { hit_answer(hits.get(i)) });
+        }
+    });
+}
+
 fn embree_stream(scene: &embree::Scene, class: Class, rh: &mut [RTCRayHit], r: &mut [RTCRay]) {
     let coherent = class.coherent();
     if class.occlusion() {
         r.par_chunks_mut(CHUNK).with_max_len(1).for_each(|c| scene.occluded1m(c, coherent));
     } else {
         rh.par_chunks_mut(CHUNK).with_max_len(1).for_each(|c| scene.intersect1m(c, coherent));
-    }
-}
-
-fn collect_embree(class: Class, rh: &[RTCRayHit], r: &[RTCRay], out: &mut Answers) {
-    for i in 0..out.len() {
-        out.set(
-            i,
-            if class.occlusion() {
-                occlusion_answer(r[i].tfar == f32::NEG_INFINITY)
-            } else {
-                let h = &rh[i];
-                embree_answer(h.ray.tfar, h.hit.geomID, h.hit.primID, h.hit.instID[0])
-            },
-        );
     }
 }
 

@@ -14,6 +14,7 @@
 pub mod accuracy;
 pub mod embree;
 pub mod harness;
+pub mod kernel;
 pub mod methods;
 pub mod rayfile;
 pub mod report;

@@ -25,8 +25,9 @@ struct Args {
     /// Image width and height in pixels (primary rays = width²).
     #[arg(long, default_value_t = 1024)]
     width: u32,
-    /// Timed passes after one warm-up pass.
-    #[arg(long, default_value_t = 5)]
+    /// Timed passes after one warm-up pass, per mode (kernel and as-called), the two engines
+    /// interleaved pass by pass (at least 1; 7 or more for ratios with a usable spread).
+    #[arg(long, default_value_t = 7)]
     passes: usize,
     /// Tracing and build threads for both engines.
     #[arg(long, default_value_t = 2)]
@@ -113,8 +114,20 @@ fn main() -> anyhow::Result<()> {
         }
         return Ok(());
     }
-    if args.threads == 0 || args.width == 0 {
-        bail!("--threads and --width must be positive");
+    if args.threads == 0 || args.width == 0 || args.passes == 0 {
+        bail!("--threads, --width and --passes must be positive");
+    }
+    // 1M rays take about 100 MB per ray class and engine; 16384² would take tens of GB.
+    if args.width > 8192 {
+        bail!("--width {} is above the 8192 supported (primary rays = width²)", args.width);
+    }
+    if let Some(m) = args.min_agreement {
+        if !(0.0..=1.0).contains(&m) {
+            bail!("--min-agreement {m} is not a fraction between 0 and 1");
+        }
+    }
+    if args.occlusion && args.trace_rays.is_none() {
+        bail!("--occlusion applies to --trace-rays only");
     }
     let pool = compare::pool(args.threads)?;
     let device = embree::Device::new(&format!("threads={}", args.threads))?;

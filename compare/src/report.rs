@@ -8,7 +8,7 @@ use anyhow::Context;
 use serde::Serialize;
 
 use crate::accuracy::{Case, Disagreements};
-use crate::harness::{Api, BuildResult, ClassResult, SceneResult};
+use crate::harness::{Api, BuildResult, ClassResult, Mode, SceneResult, quartiles};
 
 #[derive(Serialize)]
 pub struct Report {
@@ -21,8 +21,12 @@ pub struct Report {
     pub scenes: Vec<SceneJson>,
     /// Geometric mean over flat scenes × classes of the best-vs-best ratio.
     pub geomean_best_ratio: f64,
-    /// The same over instanced scenes × classes (0 if none ran).
-    pub geomean_best_ratio_instanced: f64,
+    /// The same over instanced scenes × classes (`null` if none ran).
+    pub geomean_best_ratio_instanced: Option<f64>,
+    /// The flat scenes' geometric mean in as-called mode (both engines fed from one SoA stream).
+    pub geomean_best_ratio_as_called: f64,
+    /// The geometric mean of the per-class median pair ratios (kernel mode, best vs best).
+    pub geomean_median_pair_ratio: f64,
     /// Instanced against flattened strahl with the world moved away from the origin.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub instancing_translations: Vec<crate::harness::TranslationRow>,
@@ -69,6 +73,51 @@ pub struct Apis {
     pub stream: f64,
 }
 
+/// Quartiles `[q1, median, q3]` of each API's speed ratio over the interleaved pass pairs.
+#[derive(Serialize)]
+pub struct ApisSpread {
+    pub single: [f64; 3],
+    pub packet: [f64; 3],
+    pub stream: [f64; 3],
+}
+
+/// One timing mode's figures for a class.
+#[derive(Serialize)]
+pub struct ModeJson {
+    pub mode: &'static str,
+    pub mrays: Engines,
+    pub mrays_median: Engines,
+    /// Best pass over best pass, per API.
+    pub ratio: Apis,
+    /// Quartiles of the per-pass-pair ratios, per API.
+    pub ratio_spread: ApisSpread,
+    /// Best API's best pass over the other engine's.
+    pub best_ratio: f64,
+    /// Quartiles of the per-pass best-vs-best ratios; "faster" only where q1 > 1.
+    pub best_ratio_spread: [f64; 3],
+    pub best_api: (&'static str, &'static str),
+}
+
+fn mode_json(c: &ClassResult, mode: Mode) -> ModeJson {
+    let apis = |e: usize, median: bool| Apis {
+        single: c.mrays_in(mode, e, Api::Single, median),
+        packet: c.mrays_in(mode, e, Api::Packet, median),
+        stream: c.mrays_in(mode, e, Api::Stream, median),
+    };
+    let r = |a: Api| ratio(c.mrays_in(mode, 0, a, false), c.mrays_in(mode, 1, a, false));
+    let q = |a: Api| quartiles(&c.pair_ratios(mode, a));
+    ModeJson {
+        mode: mode.name(),
+        mrays: Engines { strahl: apis(0, false), embree: apis(1, false) },
+        mrays_median: Engines { strahl: apis(0, true), embree: apis(1, true) },
+        ratio: Apis { single: r(Api::Single), packet: r(Api::Packet), stream: r(Api::Stream) },
+        ratio_spread: ApisSpread { single: q(Api::Single), packet: q(Api::Packet), stream: q(Api::Stream) },
+        best_ratio: c.best_ratio_in(mode),
+        best_ratio_spread: quartiles(&c.best_pair_ratios(mode)),
+        best_api: (c.best_in(mode, 0).0.name(), c.best_in(mode, 1).0.name()),
+    }
+}
+
 #[derive(Serialize)]
 pub struct ClassJson {
     pub class: &'static str,
@@ -86,6 +135,14 @@ pub struct ClassJson {
     pub ratio: Apis,
     pub best_ratio: f64,
     pub best_api: (&'static str, &'static str),
+    /// The mode of the figures above: always "kernel" (the headline).
+    pub mode: &'static str,
+    /// Quartiles of the kernel-mode best-vs-best pair ratios.
+    pub best_ratio_spread: [f64; 3],
+    /// Quartiles of the kernel-mode single-ray pair ratios.
+    pub single_ratio_spread: [f64; 3],
+    /// Both modes in full: `kernel` and `as_called`.
+    pub modes: [ModeJson; 2],
     pub strahl_apis_consistent: f64,
     pub embree_apis_consistent: f64,
     /// Instanced scenes: strahl instanced against strahl flattened on the same rays (`null` where
@@ -109,6 +166,8 @@ fn ratio(a: f64, b: f64) -> f64 {
 pub fn build_report(results: &[SceneResult], threads: usize, width: u32, passes: usize) -> Report {
     let mut logs = Vec::new();
     let mut logs_inst = Vec::new();
+    let mut logs_called = Vec::new();
+    let mut logs_median = Vec::new();
     let scenes = results
         .iter()
         .map(|r| SceneJson {
@@ -128,8 +187,17 @@ pub fn build_report(results: &[SceneResult], threads: usize, width: u32, passes:
                 .iter()
                 .map(|c| {
                     let br = c.best_ratio();
+                    let modes = [mode_json(c, Mode::Kernel), mode_json(c, Mode::AsCalled)];
                     if br > 0.0 {
                         if r.instanced.is_some() { &mut logs_inst } else { &mut logs }.push(br.ln());
+                    }
+                    if r.instanced.is_none() {
+                        if modes[1].best_ratio > 0.0 {
+                            logs_called.push(modes[1].best_ratio.ln());
+                        }
+                        if modes[0].best_ratio_spread[1] > 0.0 {
+                            logs_median.push(modes[0].best_ratio_spread[1].ln());
+                        }
                     }
                     ClassJson {
                         class: c.class.name(),
@@ -151,6 +219,10 @@ pub fn build_report(results: &[SceneResult], threads: usize, width: u32, passes:
                         },
                         best_ratio: br,
                         best_api: (c.best(0).0.name(), c.best(1).0.name()),
+                        mode: Mode::Kernel.name(),
+                        best_ratio_spread: modes[0].best_ratio_spread,
+                        single_ratio_spread: modes[0].ratio_spread.single,
+                        modes,
                         strahl_apis_consistent: c.strahl_apis_consistent,
                         embree_apis_consistent: c.embree_apis_consistent,
                         flat_agreement: r.instanced.as_ref().map(|_| c.flat_agreement.clone()),
@@ -169,7 +241,9 @@ pub fn build_report(results: &[SceneResult], threads: usize, width: u32, passes:
         passes,
         scenes,
         geomean_best_ratio: gm(&logs),
-        geomean_best_ratio_instanced: gm(&logs_inst),
+        geomean_best_ratio_instanced: (!logs_inst.is_empty()).then(|| gm(&logs_inst)),
+        geomean_best_ratio_as_called: gm(&logs_called),
+        geomean_median_pair_ratio: gm(&logs_median),
         instancing_translations: Vec::new(),
         scaling: Vec::new(),
         accuracy: None,
@@ -201,7 +275,8 @@ fn machine() -> String {
 
 fn commit() -> String {
     std::process::Command::new("git")
-        .args(["rev-parse", "--short", "HEAD"])
+        // This checkout's commit, wherever the harness is run from.
+        .args(["-C", env!("CARGO_MANIFEST_DIR"), "rev-parse", "--short", "HEAD"])
         .output()
         .ok()
         .filter(|o| o.status.success())
@@ -222,23 +297,42 @@ pub fn markdown(r: &Report) -> String {
         "{} · {} · {} threads for both engines · {}×{} primary rays · best of {} passes · strahl {}\n",
         r.date, r.machine, r.threads, r.width, r.width, r.passes, r.strahl_commit
     );
+    let inst = r.geomean_best_ratio_instanced.map_or("none ran".to_string(), |g| format!("**{g:.2}×**"));
     let _ = writeln!(
         s,
-        "Geometric mean of best-vs-best ratios (strahl/Embree): **{:.2}×** over flat scenes, **{:.2}×** over instanced scenes\n",
-        r.geomean_best_ratio, r.geomean_best_ratio_instanced
+        "Kernel mode (each engine traces from its own native inputs, prepared before timing; only the query calls timed). \
+         Geometric mean of best-vs-best ratios (strahl/Embree, best passes): **{:.2}×** over flat scenes (median pair ratios: {:.2}×), \
+         {inst} over instanced scenes; as called (both fed from one SoA stream in the timed loop): {:.2}× over flat scenes\n",
+        r.geomean_best_ratio, r.geomean_median_pair_ratio, r.geomean_best_ratio_as_called
     );
-    let _ = writeln!(s, "## Throughput (Mrays/s, best pass) and accuracy\n");
+    let spread = |q: [f64; 3]| {
+        let mark = if q[0] > 1.0 {
+            " ▲"
+        } else if q[2] < 1.0 {
+            " ▼"
+        } else {
+            ""
+        };
+        format!("{:.2} [{:.2}–{:.2}]{mark}", q[1], q[0], q[2])
+    };
+    let _ = writeln!(s, "## Throughput (Mrays/s, best pass, kernel mode) and accuracy\n");
     let _ = writeln!(
         s,
-        "| scene | class | rays | hit rate | hit/miss agree | prim agree | t rel p99.9 | strahl single / packet / stream | Embree single / packet / stream | best ratio |"
+        "Ratios: best pass over best pass, then the median and quartiles over the {} interleaved pass pairs \
+         (▲ faster: lower quartile above 1; ▼ slower: upper quartile below 1).\n",
+        r.passes
     );
-    let _ = writeln!(s, "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|");
+    let _ = writeln!(
+        s,
+        "| scene | class | rays | hit rate | hit/miss agree | prim agree | t rel p99.9 | strahl single / packet / stream | Embree single / packet / stream | best ratio | pairs: median [q1–q3] | single: median [q1–q3] |"
+    );
+    let _ = writeln!(s, "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     for sc in &r.scenes {
         for c in &sc.classes {
             let m = &c.mrays;
             let _ = writeln!(
                 s,
-                "| {} | {} | {} | {:.1}% | {} | {} | {:.1e} | {:.1} / {:.1} / {:.1} | {:.1} / {:.1} / {:.1} | **{:.2}×** ({} vs {}) |",
+                "| {} | {} | {} | {:.1}% | {} | {} | {:.1e} | {:.1} / {:.1} / {:.1} | {:.1} / {:.1} / {:.1} | **{:.2}×** ({} vs {}) | {} | {} |",
                 sc.name,
                 c.class,
                 c.rays,
@@ -255,6 +349,37 @@ pub fn markdown(r: &Report) -> String {
                 c.best_ratio,
                 c.best_api.0,
                 c.best_api.1,
+                spread(c.best_ratio_spread),
+                spread(c.single_ratio_spread),
+            );
+        }
+    }
+    let _ = writeln!(
+        s,
+        "\n## As called (Mrays/s, best pass): both engines fed from one SoA ray stream inside the timed loop\n"
+    );
+    let _ = writeln!(
+        s,
+        "| scene | class | strahl single / packet / stream | Embree single / packet / stream | best ratio | pairs: median [q1–q3] |"
+    );
+    let _ = writeln!(s, "|---|---|---:|---:|---:|---:|");
+    for sc in &r.scenes {
+        for c in &sc.classes {
+            let a = &c.modes[1];
+            let m = &a.mrays;
+            let _ = writeln!(
+                s,
+                "| {} | {} | {:.1} / {:.1} / {:.1} | {:.1} / {:.1} / {:.1} | {:.2}× | {} |",
+                sc.name,
+                c.class,
+                m.strahl.single,
+                m.strahl.packet,
+                m.strahl.stream,
+                m.embree.single,
+                m.embree.packet,
+                m.embree.stream,
+                a.best_ratio,
+                spread(a.best_ratio_spread),
             );
         }
     }
