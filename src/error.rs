@@ -5,18 +5,14 @@ use std::path::PathBuf;
 /// What can go wrong when loading meshes or building a scene.
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
-    #[error("cannot read OBJ file {path}: {source}")]
-    Obj {
-        path: PathBuf,
-        #[source]
-        source: tobj::LoadError,
-    },
-    #[error("cannot read {path}: {source}")]
-    Io {
-        path: PathBuf,
-        #[source]
-        source: std::io::Error,
-    },
+    /// The cause is part of the message (and not also a `source()`, which would print it twice
+    /// in an error chain).
+    #[error("cannot read OBJ file {path}: {cause}")]
+    Obj { path: PathBuf, cause: tobj::LoadError },
+    #[error("{path}, line {line}: {message}")]
+    ObjRecord { path: PathBuf, line: usize, message: String },
+    #[error("cannot read {path}: {cause}")]
+    Io { path: PathBuf, cause: std::io::Error },
     #[error("position buffer of length {len} is not a whole number of xyz triples")]
     RaggedPositions { len: usize },
     #[error("index buffer of length {len} is not a whole number of triangles")]

@@ -45,7 +45,7 @@ pub use bvh::group::GROUP;
 pub use bvh::{BoxTest, BuildConfig, BuildStats};
 pub use camera::Camera;
 pub use error::{Error, Result};
-pub use geometry::{MAX_COORDINATE, TriangleMesh, TriangleTest, exact_hit, intersect_triangle, load_obj};
+pub use geometry::{MAX_COORDINATE, TriangleMesh, TriangleTest, exact_hit, intersect_triangle, load_obj, parse_obj};
 pub use instance::{Instance, InstancedScene, InstancedStats};
 pub use ray::{Hit, HitPacket, HitStream, INVALID_ID, PACKET_WIDTH, Ray, RayPacket, RayStream, offset_ray_origin};
 pub use scene::{Coherence, Query, STREAM_CHUNK, Scene};

@@ -387,7 +387,11 @@ impl RayStream {
                 active: crate::simd::low_bits(PACKET_WIDTH),
             };
         }
-        let mut p = RayPacket::default();
+        let mut p = RayPacket { active: 0, ..RayPacket::default() };
+        if n == 0 {
+            // `start` at or past the end: an empty packet (slicing from there would panic).
+            return p;
+        }
         p.ox[..n].copy_from_slice(&self.ox[start..start + n]);
         p.oy[..n].copy_from_slice(&self.oy[start..start + n]);
         p.oz[..n].copy_from_slice(&self.oz[start..start + n]);

@@ -25,6 +25,7 @@
 //! rotate = [0.0, 45.0, 0.0]
 //! scale = 2.0                 # or [x, y, z]
 //! # matrix = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0]]  instead: rows of the 3×4 matrix
+//! #                                (a fourth row, if given, must be [0, 0, 0, 1])
 //!
 //! [[grid]]                    # count[0]·count[1]·count[2] instances on a lattice
 //! mesh = "ball"
@@ -36,8 +37,12 @@
 //! seed = 1
 //! ```
 //!
-//! Unknown keys, unknown mesh names, a mesh with no or two sources, and a malformed entry are
-//! [`Error::SceneFile`]s naming the file and the entry; a missing OBJ file is the loader's error.
+//! Unknown keys, unknown mesh names, a mesh with no or two sources, a malformed entry, a
+//! non-finite light, and sizes beyond the limits below are [`Error::SceneFile`]s naming the file,
+//! the entry and the numbers, found before anything is allocated for them; a missing OBJ file is
+//! the loader's error. Limits: [`MAX_SCENE_INSTANCES`] instances in all (instances and grids
+//! together), [`MAX_GENERATED_TRIANGLES`] triangles per generated mesh, sphere radii up to half
+//! [`MAX_COORDINATE`](crate::MAX_COORDINATE), files up to [`MAX_SCENE_FILE_BYTES`].
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -52,6 +57,21 @@ use crate::geometry::{TriangleMesh, load_obj};
 use crate::instance::{Instance, InstancedScene};
 use crate::procedural;
 use crate::raygen::Pcg32;
+
+/// Largest scene file read, in bytes.
+pub const MAX_SCENE_FILE_BYTES: u64 = 64 << 20;
+
+/// Most instances one scene file may place, counting every `[[instance]]` and every grid cell
+/// (2^24; the two-level build needs about 256 bytes per instance, so this is about 4 GiB).
+pub const MAX_SCENE_INSTANCES: u64 = 1 << 24;
+
+/// Most triangles of one generated mesh (`sphere`, `sphereflake`): 2^26, a few GiB to build.
+pub const MAX_GENERATED_TRIANGLES: u64 = 1 << 26;
+
+/// Triangles of [`procedural::uv_sphere`] with these counts (after its own clamps).
+fn sphere_triangles(stacks: u32, slices: u32) -> u64 {
+    2 * slices.max(3) as u64 * (stacks.max(2) as u64 - 1)
+}
 
 /// A point light.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -116,7 +136,11 @@ impl SceneFile {
     /// Reads and checks a scene file; meshes are not loaded yet.
     pub fn read(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;
+        let bytes = crate::geometry::obj::read_regular(path, MAX_SCENE_FILE_BYTES)?;
+        let text = String::from_utf8(bytes).map_err(|e| Error::Io {
+            path: path.to_path_buf(),
+            cause: std::io::Error::new(std::io::ErrorKind::InvalidData, e.utf8_error()),
+        })?;
         Self::parse(&text, path)
     }
 
@@ -131,14 +155,33 @@ impl SceneFile {
             if sources != 1 {
                 return Err(err(format!("mesh `{name}` needs exactly one of `obj`, `sphereflake`, `sphere`")));
             }
+            let too_many = |tris: f64| {
+                err(format!(
+                    "mesh `{name}`: {tris:.3e} triangles; at most {MAX_GENERATED_TRIANGLES} (2^26) per generated mesh"
+                ))
+            };
             let source = if let Some(p) = &m.obj {
                 MeshSource::Obj(base.join(p))
             } else if let Some(s) = &m.sphereflake {
+                // 1 + 9 + … + 9^levels spheres.
+                let spheres = (9f64.powi(s.levels.min(1000) as i32 + 1) - 1.0) / 8.0;
+                let tris = spheres * sphere_triangles(s.stacks, s.slices) as f64;
+                if tris > MAX_GENERATED_TRIANGLES as f64 {
+                    return Err(too_many(tris));
+                }
                 MeshSource::Sphereflake { levels: s.levels, stacks: s.stacks, slices: s.slices }
             } else {
                 let s = m.sphere.as_ref().expect("counted above");
-                if !(s.radius.is_finite() && s.radius > 0.0) {
-                    return Err(err(format!("mesh `{name}`: sphere radius must be positive")));
+                if !(s.radius.is_finite() && s.radius > 0.0 && s.radius <= 0.5 * crate::MAX_COORDINATE) {
+                    return Err(err(format!(
+                        "mesh `{name}`: sphere radius {} must be positive and at most {:e}",
+                        s.radius,
+                        0.5 * crate::MAX_COORDINATE
+                    )));
+                }
+                let tris = sphere_triangles(s.stacks, s.slices);
+                if tris > MAX_GENERATED_TRIANGLES {
+                    return Err(too_many(tris as f64));
                 }
                 MeshSource::Sphere { radius: s.radius, stacks: s.stacks, slices: s.slices }
             };
@@ -150,7 +193,22 @@ impl SceneFile {
                 .position(|(n, _)| n == mesh)
                 .ok_or_else(|| err(format!("{what} places mesh `{mesh}`, which no [mesh.{mesh}] table defines")))
         };
+        // Every instance counted before any is made.
+        let mut total = raw.instance.len() as u64;
+        for (g, grid) in raw.grid.iter().enumerate() {
+            let cells = grid.count.iter().map(|&c| c as u64).product::<u64>();
+            if cells == 0 {
+                return Err(err(format!("grid {g}: count {:?} places no instance", grid.count)));
+            }
+            total = total.saturating_add(cells);
+        }
+        if total > MAX_SCENE_INSTANCES {
+            return Err(err(format!(
+                "{total} instances in all (instances and grid cells); at most {MAX_SCENE_INSTANCES} (2^24)"
+            )));
+        }
         let mut instances = Vec::new();
+        instances.try_reserve_exact(total as usize).map_err(|e| err(format!("{total} instances: {e}")))?;
         for (i, inst) in raw.instance.iter().enumerate() {
             let what = format!("instance {i}");
             let object = index(&inst.mesh, &what)?;
@@ -158,6 +216,21 @@ impl SceneFile {
                 Some(rows) => {
                     if inst.translate.is_some() || inst.rotate.is_some() || inst.scale.is_some() {
                         return Err(err(format!("{what}: give `matrix` or translate/rotate/scale, not both")));
+                    }
+                    match rows.len() {
+                        3 => {}
+                        4 if rows[3] == [0.0, 0.0, 0.0, 1.0] => {}
+                        4 => {
+                            return Err(err(format!(
+                                "{what}: the matrix's fourth row is {:?}; an affine transform's is [0, 0, 0, 1]",
+                                rows[3]
+                            )));
+                        }
+                        n => {
+                            return Err(err(format!(
+                                "{what}: `matrix` has {n} rows; give 3 (or 4, the last [0, 0, 0, 1])"
+                            )));
+                        }
                     }
                     let c = |k: usize| Vec3::new(rows[0][k], rows[1][k], rows[2][k]);
                     Affine3A::from_mat3_translation(Mat3::from_cols(c(0), c(1), c(2)), c(3))
@@ -175,10 +248,6 @@ impl SceneFile {
             let what = format!("grid {g}");
             let object = index(&grid.mesh, &what)?;
             let n = grid.count;
-            let total = n.iter().map(|&c| c as u64).product::<u64>();
-            if total == 0 || total > 1 << 26 {
-                return Err(err(format!("{what}: count {n:?} must place between 1 and 2^26 instances")));
-            }
             let spacing = Vec3::from(grid.spacing);
             let origin = grid.origin.map_or(Vec3::ZERO, Vec3::from);
             let (lo_s, hi_s) = match grid.scale {
@@ -216,11 +285,21 @@ impl SceneFile {
                 return Err(err("camera: eye, look_at and up must span a view, and fov lie in (0, 180)".into()));
             }
         }
-        let lights = raw
-            .light
-            .iter()
-            .map(|l| Light { position: l.position.into(), color: l.color.map_or(Vec3::ONE, Vec3::from) })
-            .collect();
+        let mut lights = Vec::with_capacity(raw.light.len());
+        for (i, l) in raw.light.iter().enumerate() {
+            let light = Light { position: l.position.into(), color: l.color.map_or(Vec3::ONE, Vec3::from) };
+            if !(light.position.is_finite() && light.position.abs().max_element() <= crate::MAX_COORDINATE) {
+                return Err(err(format!(
+                    "light {i}: position {} must be finite and within ±{:e}",
+                    light.position,
+                    crate::MAX_COORDINATE
+                )));
+            }
+            if !(light.color.is_finite() && light.color.min_element() >= 0.0) {
+                return Err(err(format!("light {i}: color {} must be finite and not negative", light.color)));
+            }
+            lights.push(light);
+        }
         Ok(Self { path: path.to_path_buf(), meshes, instances, camera, lights })
     }
 
@@ -329,7 +408,7 @@ struct RawInstance {
     translate: Option<[f32; 3]>,
     rotate: Option<[f32; 3]>,
     scale: Option<Scale>,
-    matrix: Option<[[f32; 4]; 3]>,
+    matrix: Option<Vec<[f32; 4]>>,
 }
 
 #[derive(Deserialize)]

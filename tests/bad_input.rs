@@ -104,7 +104,7 @@ fn nan_and_degenerate_triangles_are_skipped_not_hit() {
 
 #[test]
 fn malformed_obj_files_are_errors() {
-    assert!(matches!(Scene::from_obj("/no/such/file.obj", &BuildConfig::default()), Err(Error::Obj { .. })));
+    assert!(matches!(Scene::from_obj("/no/such/file.obj", &BuildConfig::default()), Err(Error::Io { .. })));
     let p = tmp("garbage.obj", "v 1 2\nf 1 2 3\n");
     assert!(Scene::from_obj(&p, &BuildConfig::default()).is_err());
     let p = tmp("range.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n");

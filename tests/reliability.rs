@@ -282,3 +282,52 @@ fn hits_lie_in_the_open_interval_with_finite_barycentrics() {
         }
     }
 }
+
+/// Finding 11: `RayStream::packet` clamps to the stream, from any start.
+#[test]
+fn stream_packets_clamp_from_any_start() {
+    let s: RayStream = random_rays(1, 20).into_iter().collect();
+    assert_eq!(s.packet(16, 16).active, 0b1111);
+    for start in [20, 21, 1000, usize::MAX] {
+        assert_eq!(s.packet(start, 16).active, 0, "start {start}");
+    }
+}
+
+/// Findings 6, 7 and 9: scene files that once aborted on allocation or were silently accepted
+/// are typed errors naming the entry and the numbers.
+#[test]
+fn scene_file_limits_are_typed_errors() {
+    let p = std::path::Path::new("/scenes/x.toml");
+    let cases = [
+        (
+            "[mesh.b]\nsphere = { radius = 1.0, stacks = 4, slices = 4 }\n[[grid]]\nmesh = \"b\"\ncount = [4096, 4096, 4]\nspacing = [1.0, 1.0, 1.0]\n[[grid]]\nmesh = \"b\"\ncount = [4096, 4096, 4]\nspacing = [1.0, 1.0, 1.0]\n",
+            "instances in all",
+        ),
+        (
+            "[mesh.b]\nsphere = { radius = 1.0, stacks = 4, slices = 4 }\n[[grid]]\nmesh = \"b\"\ncount = [4097, 4096, 1]\nspacing = [1.0, 1.0, 1.0]\n",
+            "2^24",
+        ),
+        ("[mesh.f]\nsphereflake = { levels = 12, stacks = 8, slices = 16 }\n", "triangles"),
+        ("[mesh.s]\nsphere = { radius = 1.0, stacks = 100000, slices = 100000 }\n", "triangles"),
+        ("[mesh.s]\nsphere = { radius = 1e30, stacks = 4, slices = 4 }\n", "radius"),
+        ("[[light]]\nposition = [nan, 0.0, 0.0]\n", "light 0"),
+        ("[[light]]\nposition = [1e30, 0.0, 0.0]\n", "light 0"),
+        ("[[light]]\nposition = [0.0, 0.0, 0.0]\ncolor = [-1.0, 0.0, 0.0]\n", "light 0"),
+        (
+            "[mesh.s]\nsphere = { radius = 1.0, stacks = 4, slices = 4 }\n[[instance]]\nmesh = \"s\"\nmatrix = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 2]]\n",
+            "fourth row",
+        ),
+        (
+            "[mesh.s]\nsphere = { radius = 1.0, stacks = 4, slices = 4 }\n[[instance]]\nmesh = \"s\"\nmatrix = [[1, 0, 0, 0], [0, 1, 0, 0]]\n",
+            "2 rows",
+        ),
+    ];
+    for (text, needle) in cases {
+        match strahl::SceneFile::parse(text, p) {
+            Err(e @ strahl::Error::SceneFile { .. }) => assert!(e.to_string().contains(needle), "{needle}: {e}"),
+            other => panic!("{needle}: {other:?}"),
+        }
+    }
+    let ok = "[mesh.s]\nsphere = { radius = 1.0, stacks = 4, slices = 4 }\n[[instance]]\nmesh = \"s\"\nmatrix = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]\n";
+    assert_eq!(strahl::SceneFile::parse(ok, p).unwrap().instances.len(), 1);
+}

@@ -162,8 +162,7 @@ fn main() -> anyhow::Result<()> {
     let mut results = Vec::new();
     for spec in &specs {
         let mut r = harness::run_scene(spec, &pool, &device, &settings, |step| {
-            bar.set_message(format!("{}: {step}", spec.name));
-            bar.inc(1);
+            bar.step(format!("{}: {step}", spec.name));
         })?;
         if let Some(stats) = harness::embree_stats(spec, args.threads) {
             r.build.set_embree_stats(&stats);
@@ -178,7 +177,7 @@ fn main() -> anyhow::Result<()> {
         }
         results.push(r);
     }
-    bar.finish_and_clear();
+    bar.finish();
 
     let mut rep = report::build_report(&results, args.threads, args.width, args.passes);
     if args.scaling {
@@ -194,15 +193,14 @@ fn main() -> anyhow::Result<()> {
         let mut rows = Vec::new();
         for spec in &series {
             let mut r = harness::run_scene(spec, &pool, &device, &small, |step| {
-                bar.set_message(format!("scaling {}: {step}", spec.name));
-                bar.inc(1);
+                bar.step(format!("scaling {}: {step}", spec.name));
             })?;
             if let Some(stats) = harness::embree_stats(spec, args.threads) {
                 r.build.set_embree_stats(&stats);
             }
             rows.push(report::ScalingRow::of(&r));
         }
-        bar.finish_and_clear();
+        bar.finish();
         rep.scaling = rows;
         if let Err(e) = report::scaling_chart(&args.out.join("scaling.png"), &rep.scaling) {
             eprintln!("scaling chart skipped: {e:#}");
@@ -232,12 +230,11 @@ fn main() -> anyhow::Result<()> {
             passes: args.passes.clamp(1, 3),
             ..methods::Settings::default()
         };
-        let bar = ProgressBar::new_spinner();
+        let bar = Progress::new(ProgressBar::new_spinner());
         let acc = methods::run(&scenes_rays, &project_dir("../shared/scenes"), &pool, &device, &ms, |m| {
-            bar.set_message(format!("accuracy: {m}"));
-            bar.tick();
+            bar.step(format!("accuracy: {m}"));
         })?;
-        bar.finish_and_clear();
+        bar.finish();
         if let Err(e) = methods::charts(&args.out, &acc) {
             eprintln!("accuracy charts skipped: {e:#}");
         }
@@ -269,10 +266,40 @@ fn main() -> anyhow::Result<()> {
 }
 
 /// A progress bar over `scenes` scenes of five steps each.
-fn progress_bar(scenes: usize) -> ProgressBar {
+fn progress_bar(scenes: usize) -> Progress {
     let bar = ProgressBar::new((scenes * 5) as u64);
     bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} {elapsed} {msg}").expect("valid template"));
-    bar
+    Progress::new(bar)
+}
+
+/// A progress bar on a terminal; elsewhere (CI logs, a pipe), where indicatif draws nothing, one
+/// plain line per step with the time since the start.
+struct Progress {
+    bar: Option<ProgressBar>,
+    start: std::time::Instant,
+}
+
+impl Progress {
+    fn new(bar: ProgressBar) -> Self {
+        use std::io::IsTerminal;
+        Self { bar: std::io::stderr().is_terminal().then_some(bar), start: std::time::Instant::now() }
+    }
+
+    fn step(&self, msg: String) {
+        match &self.bar {
+            Some(b) => {
+                b.set_message(msg);
+                b.inc(1);
+            }
+            None => eprintln!("[{:7.1} s] {msg}", self.start.elapsed().as_secs_f64()),
+        }
+    }
+
+    fn finish(&self) {
+        if let Some(b) = &self.bar {
+            b.finish_and_clear();
+        }
+    }
 }
 
 fn dump(dir: &Path, spec: &scenes::SceneSpec, r: &harness::SceneResult) -> anyhow::Result<()> {

@@ -1,6 +1,7 @@
 //! Wavefront OBJ loading through `tobj`: polygons fan-triangulated, one geometry per OBJ object or
 //! group, materials ignored.
 
+use std::io::Read;
 use std::path::Path;
 
 use glam::Vec3;
@@ -8,16 +9,33 @@ use glam::Vec3;
 use super::mesh::TriangleMesh;
 use crate::error::{Error, Result};
 
+/// Largest OBJ file read, in bytes (4 GiB; the largest shared scene is 40 MB).
+pub const MAX_OBJ_BYTES: u64 = 4 << 30;
+
+/// Largest magnitude of an index in an `f` record: larger ones name no vertex of any file this
+/// loader reads, and tobj's arithmetic on them overflows (a panic in debug builds).
+const MAX_OBJ_INDEX: i64 = 1 << 32;
+
 /// Loads every object/group of an OBJ file with at least one face as its own mesh, in file order.
 ///
-/// A missing file, a malformed record or an out-of-range index is an [`Error`]; a file with no
-/// faces gives an empty list (an empty scene, which every ray misses).
+/// Only regular files up to [`MAX_OBJ_BYTES`] are read (a FIFO or a device is an error, not a
+/// hang); material libraries (`mtllib`) are never opened. A missing or unreadable file is an
+/// [`Error::Io`] with the OS's cause; a malformed `v` or `f` record (too few numbers, a face of
+/// one or two vertices, a file cut off mid-face, an absurd index) an [`Error::ObjRecord`] naming
+/// the line; an out-of-range index an [`Error::IndexOutOfRange`]. A file with no faces gives an
+/// empty list (an empty scene, which every ray misses).
 pub fn load_obj(path: impl AsRef<Path>) -> Result<Vec<TriangleMesh>> {
     let path = path.as_ref();
+    parse_obj(&read_regular(path, MAX_OBJ_BYTES)?, path)
+}
+
+/// [`load_obj`] on the bytes of an OBJ file already in memory; `path` names it in errors.
+pub fn parse_obj(bytes: &[u8], path: &Path) -> Result<Vec<TriangleMesh>> {
+    check_records(path, bytes)?;
     let opts = tobj::LoadOptions { triangulate: true, single_index: false, ignore_points: true, ignore_lines: true };
-    // Material libraries are not needed for ray queries; a missing .mtl is not an error.
-    let (models, _materials) =
-        tobj::load_obj(path, &opts).map_err(|source| Error::Obj { path: path.to_owned(), source })?;
+    // Material libraries are not needed for ray queries: the loader refuses them unread.
+    let (models, _materials) = tobj::load_obj_buf(&mut &bytes[..], &opts, |_| Err(tobj::LoadError::OpenFileFailed))
+        .map_err(|cause| Error::Obj { path: path.to_owned(), cause })?;
     let mut meshes = Vec::with_capacity(models.len());
     for model in models {
         let m = model.mesh;
@@ -35,6 +53,68 @@ pub fn load_obj(path: impl AsRef<Path>) -> Result<Vec<TriangleMesh>> {
         meshes.push(TriangleMesh::new(model.name, positions, indices)?);
     }
     Ok(meshes)
+}
+
+/// The whole of `path` if it is a regular file of at most `cap` bytes.
+pub(crate) fn read_regular(path: &Path, cap: u64) -> Result<Vec<u8>> {
+    let io = |cause: std::io::Error| Error::Io { path: path.to_owned(), cause };
+    let file = std::fs::File::open(path).map_err(io)?;
+    let meta = file.metadata().map_err(io)?;
+    if !meta.is_file() {
+        return Err(io(std::io::Error::new(std::io::ErrorKind::InvalidInput, "not a regular file")));
+    }
+    if meta.len() > cap {
+        let msg = format!("{} bytes, more than the {cap} read", meta.len());
+        return Err(io(std::io::Error::new(std::io::ErrorKind::InvalidData, msg)));
+    }
+    let mut bytes = Vec::with_capacity(meta.len() as usize);
+    // `take`: a file that grows while it is read still stops at the cap.
+    file.take(cap + 1).read_to_end(&mut bytes).map_err(io)?;
+    if bytes.len() as u64 > cap {
+        return Err(io(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!("more than the {cap} bytes read"),
+        )));
+    }
+    Ok(bytes)
+}
+
+/// Checks the `v` and `f` records line by line, so that their errors name the line (tobj's do
+/// not) and faces tobj would drop silently are errors.
+fn check_records(path: &Path, bytes: &[u8]) -> Result<()> {
+    let bad = |line: usize, message: String| Error::ObjRecord { path: path.to_owned(), line, message };
+    for (k, raw) in bytes.split(|&b| b == b'\n').enumerate() {
+        let line = k + 1;
+        let text = String::from_utf8_lossy(raw);
+        let mut words = text.split_whitespace();
+        match words.next() {
+            Some("v") => {
+                let n = words.take(3).filter(|w| w.parse::<f32>().is_ok()).count();
+                if n < 3 {
+                    return Err(bad(line, format!("a vertex needs three numbers: \"{}\"", text.trim())));
+                }
+            }
+            Some("f") => {
+                let refs: Vec<&str> = words.collect();
+                if refs.len() < 3 {
+                    return Err(bad(line, format!("a face needs three vertices, this has {}", refs.len())));
+                }
+                for r in refs {
+                    for (j, part) in r.split('/').enumerate() {
+                        if part.is_empty() && j > 0 {
+                            continue;
+                        }
+                        match part.parse::<i64>() {
+                            Ok(i) if i != 0 && i.abs() <= MAX_OBJ_INDEX => {}
+                            _ => return Err(bad(line, format!("\"{r}\" is no vertex reference"))),
+                        }
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -61,8 +141,35 @@ mod tests {
     #[test]
     fn missing_file_is_an_error() {
         let e = load_obj("/nonexistent/strahl/none.obj").unwrap_err();
-        assert!(matches!(e, Error::Obj { .. }), "{e}");
-        assert!(e.to_string().contains("none.obj"));
+        assert!(matches!(e, Error::Io { .. }), "{e}");
+        assert!(e.to_string().contains("none.obj") && e.to_string().contains("No such file"), "{e}");
+    }
+
+    #[test]
+    fn devices_fifos_and_folders_are_not_read() {
+        for p in ["/dev/zero", "/dev/null", "/tmp"] {
+            let e = load_obj(p).unwrap_err();
+            assert!(e.to_string().contains("not a regular file"), "{p}: {e}");
+        }
+        // A material library naming a device is never opened.
+        let p = write_tmp("mtl.obj", "mtllib /dev/zero\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+        assert_eq!(load_obj(&p).unwrap()[0].triangle_count(), 1);
+    }
+
+    #[test]
+    fn short_faces_and_absurd_indices_name_the_line() {
+        for (text, line) in [
+            ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2\n", 4),
+            ("v 0 0 0\nv 1 0 0\n\nv 0 1 0\nf 1 2 3\nf 1", 6),
+            ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1//1 2//1 3//7000000000000000000\n", 4),
+            ("v 0 0 0\nv 1 0\n", 2),
+        ] {
+            let p = write_tmp("short.obj", text);
+            match load_obj(&p) {
+                Err(Error::ObjRecord { line: l, .. }) => assert_eq!(l, line, "{text:?}"),
+                other => panic!("{text:?}: {other:?}"),
+            }
+        }
     }
 
     #[test]
