@@ -360,7 +360,10 @@ fn brute_force_occlusion(world: &dyn World, ray: &Ray) -> (bool, Option<&'static
             }
             (None, kind) => {
                 let (t, b) = h.expect("ties exist");
-                if t > ray.tnear as f64 - DEPTH_TOL * t.abs() && t < best.0 {
+                // A tie at the ray's start (a ray from a vertex: t = 0 within rounding) counts
+                // within the same depth tolerance `decide` allows.
+                let tol = (DEPTH_TOL * t.abs()).max(depth_tolerance(ray, tri));
+                if t >= ray.tnear as f64 - tol && t < best.0 {
                     best = (t, min3(b));
                     tie = Some(if kind == "depth" { "depth_tie" } else { "edge_or_vertex_tie" });
                 }

@@ -13,6 +13,7 @@
 
 pub mod accuracy;
 pub mod embree;
+pub mod fuzz;
 pub mod harness;
 pub mod kernel;
 pub mod methods;

@@ -69,3 +69,13 @@ fn shared_scenes_agree_with_embree_when_present() {
         check(&spec, 128);
     }
 }
+
+#[test]
+fn random_small_scenes_disagree_with_embree_only_in_ties() {
+    // A short differential fuzzing run (compare::fuzz; `--example embree_fuzz` for long ones).
+    let pool = compare::pool(2).unwrap();
+    let device = embree::Device::new("threads=2").unwrap();
+    let s = compare::fuzz::run(20261126, 300, &device, &pool).unwrap();
+    assert_eq!(s.scenes, 300);
+    assert!(s.strahl_errors.is_empty(), "{:#?}", s.strahl_errors);
+}

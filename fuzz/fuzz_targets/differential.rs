@@ -10,8 +10,8 @@ use arbitrary::Arbitrary;
 use glam::Vec3;
 use libfuzzer_sys::fuzz_target;
 use strahl::{
-    BoxTest, BuildConfig, Coherence, Hit, HitPacket, HitStream, Query, Ray, RayPacket, RayStream, Scene, TriangleMesh,
-    TriangleTest,
+    BoxTest, BuildConfig, Coherence, Hit, HitPacket, HitStream, Instance, InstancedScene, Query, Ray, RayPacket,
+    RayStream, Scene, TriangleMesh, TriangleTest,
 };
 
 #[derive(Arbitrary, Debug, Clone, Copy)]
@@ -36,6 +36,9 @@ struct Input {
     scale: u8,
     tris: Vec<[[Coord; 3]; 3]>,
     rays: Vec<RayIn>,
+    /// Instances of the soup: a translation (in units of the scale), a turn about y in
+    /// 1/256 turns, and a scale exponent.
+    instances: Vec<([i8; 3], u8, i8)>,
 }
 
 fn value(c: Coord, scale: f32) -> f32 {
@@ -69,6 +72,20 @@ fn verdict(r: &Ray, tri: [Vec3; 3]) -> Option<bool> {
             None
         }
         Some((t, b)) => {
+            // The tests' products are of third degree: the determinant `(e2 × e1) · d` and
+            // `t·det` around size²·|d| and size²·|t·d|. Near float32's smallest normal numbers
+            // (and below them, flushed to zero by FTZ/DAZ) no float32 test can tell; an instance
+            // scaled by up to 2^7 makes its object's products 2^21 times smaller still.
+            let tiny = 1e-28;
+            // Beyond the documented range (coordinates within ±2^40, instances scaling by up to
+            // 2^7; direction lengths from 1e-12 to 1e13), answers are best effort: only the
+            // interval and consistency checks hold there.
+            if !(1e-12..=1e13).contains(&dlen) || mag > 4.4e12 {
+                return None;
+            }
+            if size * size * dlen < tiny || size * size * dlen * t.abs() < tiny {
+                return None;
+            }
             let mb = b[0].min(b[1]).min(b[2]);
             let mt = 1e-3 * t.abs() + 256.0 * eps * mag / dlen;
             if mb < -margin || t < tn - mt || t > tf + mt {
@@ -142,6 +159,7 @@ fuzz_target!(|input: Input| {
         idx.push([k, k + 1, k + 2]);
     }
     let Ok(mesh) = TriangleMesh::new("fuzz", p, idx) else { return };
+    let object = mesh.clone();
     let rays: Vec<Ray> = input
         .rays
         .iter()
@@ -181,7 +199,11 @@ fuzz_target!(|input: Input| {
                 check.closest("packet", r, hp.get(l), brute[16 * c + l]);
             }
             if occ & (1 << l) != 0 {
-                assert!(hp.get(l).is_some() || brute[16 * c + l].is_some() || !strict, "{}: occluded packet lane", check.what);
+                assert!(
+                    hp.get(l).is_some() || brute[16 * c + l].is_some() || !strict,
+                    "{}: occluded packet lane",
+                    check.what
+                );
             }
         }
     }
@@ -197,5 +219,47 @@ fuzz_target!(|input: Input| {
             }
             assert_eq!(occ.len(), rays.len());
         }
+    }
+    // Instanced against flattened: the same placements built both ways. Each engine of the two
+    // rounds its own way (the instance moves the ray, the flattening the vertices), so a
+    // disagreement is a bug only where the flattened triangle's float64 verdict is clear.
+    if input.instances.is_empty() || input.instances.len() > 4 || !strict {
+        return;
+    }
+    let instances: Vec<Instance> = input
+        .instances
+        .iter()
+        .map(|&(t, turn, s)| {
+            let at = Vec3::new(t[0] as f32, t[1] as f32, t[2] as f32) * scale;
+            let rot = glam::Quat::from_rotation_y(turn as f32 / 256.0 * std::f32::consts::TAU);
+            let sc = 2f32.powi((s % 8) as i32);
+            Instance::new(0, glam::Affine3A::from_scale_rotation_translation(Vec3::splat(sc), rot, at))
+        })
+        .collect();
+    let config = base.with_tests(test, boxes);
+    let Ok(world) = InstancedScene::build(vec![vec![object]], instances, &config) else { return };
+    let Ok(flat) = world.flatten(&config) else { return };
+    let fcheck = Check { scene: &flat, what: format!("{} instanced", check.what) };
+    for r in &rays {
+        let (a, f) = (world.intersect(r), flat.intersect(r));
+        // Badouel's test projects the hit point `o + t·d`, whose error grows with `|t·d|` beyond
+        // the margin above; its answers in two spaces are compared by consistency only.
+        if test != TriangleTest::Badouel {
+            match (a, f) {
+                // Flattening numbers the meshes instance by instance: one mesh per instance here.
+                (Some(h), None) => assert!(
+                    verdict(r, flat.meshes()[h.inst_id as usize].triangle(h.prim_id as usize)) != Some(false),
+                    "{}: the instanced world hit {h:?}, clearly a miss in float64, for {r:?}",
+                    fcheck.what
+                ),
+                (None, Some(h)) => assert!(
+                    verdict(r, fcheck.tri(&h)) != Some(true),
+                    "{}: the instanced world lost the clear hit {h:?} for {r:?}",
+                    fcheck.what
+                ),
+                _ => {}
+            }
+        }
+        assert_eq!(world.occluded(r), a.is_some(), "{}: occluded vs intersect for {r:?}", fcheck.what);
     }
 });
