@@ -279,7 +279,7 @@ impl InstancedScene {
         if !ray.is_valid() {
             return None;
         }
-        let ray = &ray.from_zero();
+        let ray = &ray.clamped_to_zero();
         let mut best: Option<Hit> = None;
         for (i, inst) in self.instances.iter().enumerate() {
             let to_object = inst.transform.inverse();
@@ -317,7 +317,7 @@ impl InstancedScene {
         if !ray.is_valid() {
             return None;
         }
-        self.trace1_from::<ANY, K, CONS>(&ray.from_zero(), self.root, stack)
+        self.trace1_from::<ANY, K, CONS>(&ray.clamped_to_zero(), self.root, stack)
     }
 
     /// [`trace1_with`](Self::trace1_with) over the instance subtree at `root`.

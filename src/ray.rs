@@ -55,7 +55,7 @@ impl Ray {
     /// This ray with a negative `tnear` raised to `+0.0`: the interval every query traces (call
     /// after [`is_valid`](Self::is_valid), which rejects a NaN `tnear`).
     #[inline(always)]
-    pub(crate) fn from_zero(mut self) -> Ray {
+    pub(crate) fn clamped_to_zero(mut self) -> Ray {
         self.tnear = self.tnear.max(0.0) + 0.0;
         self
     }

@@ -48,14 +48,9 @@ fn agrees_with_brute_force(scene: &Scene, rays: &[Ray], rel: f32, what: &str) {
     }
 }
 
+/// Every triangle test with the conservative box test (the one that promises to lose no hit).
 fn configs() -> Vec<BuildConfig> {
-    let mut v = Vec::new();
-    for test in TriangleTest::ALL {
-        for boxes in [BoxTest::Conservative] {
-            v.push(BuildConfig { triangle_test: test, box_test: boxes, ..BuildConfig::default() });
-        }
-    }
-    v
+    TriangleTest::ALL.iter().map(|&t| BuildConfig::default().with_tests(t, BoxTest::Conservative)).collect()
 }
 
 /// Finding 1: a ray far from the scene, parallel to two axes, with a negative `tnear` panicked in

@@ -28,7 +28,7 @@ pub struct FuzzStats {
 /// A random small scene: `(meshes, rays)`.
 pub fn random_case(rng: &mut Pcg32) -> (Vec<TriangleMesh>, Vec<Ray>) {
     let scale = 2f32.powi((rng.next_u32() % 41) as i32 - 20);
-    let offset = if rng.next_u32() % 4 == 0 { scale * 1024.0 * (rng.next_f32() - 0.5) } else { 0.0 };
+    let offset = if rng.next_u32().is_multiple_of(4) { scale * 1024.0 * (rng.next_f32() - 0.5) } else { 0.0 };
     let grid = |rng: &mut Pcg32| (rng.next_u32() % 9) as f32 * 0.25 - 1.0;
     let mut p: Vec<Vec3> = Vec::new();
     let mut idx: Vec<[u32; 3]> = Vec::new();
@@ -46,7 +46,7 @@ pub fn random_case(rng: &mut Pcg32) -> (Vec<TriangleMesh>, Vec<Ray>) {
             // A copy of an earlier triangle, or one sharing its edge.
             3 if !idx.is_empty() => {
                 let t = idx[(rng.next_u32() as usize) % idx.len()];
-                if rng.next_u32() % 2 == 0 {
+                if rng.next_u32().is_multiple_of(2) {
                     idx.push(t);
                 } else {
                     p.push(Vec3::new(grid(rng), grid(rng), grid(rng)));

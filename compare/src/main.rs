@@ -121,10 +121,10 @@ fn main() -> anyhow::Result<()> {
     if args.width > 8192 {
         bail!("--width {} is above the 8192 supported (primary rays = width²)", args.width);
     }
-    if let Some(m) = args.min_agreement {
-        if !(0.0..=1.0).contains(&m) {
-            bail!("--min-agreement {m} is not a fraction between 0 and 1");
-        }
+    if let Some(m) = args.min_agreement
+        && !(0.0..=1.0).contains(&m)
+    {
+        bail!("--min-agreement {m} is not a fraction between 0 and 1");
     }
     if args.occlusion && args.trace_rays.is_none() {
         bail!("--occlusion applies to --trace-rays only");

@@ -82,7 +82,7 @@ impl Bvh {
             if !ray.is_valid() {
                 continue;
             }
-            let ray = ray.from_zero();
+            let ray = ray.clamped_to_zero();
             if octant_of(&ray) != octant {
                 if self.trace1_with::<true, false, K, CONS>(&ray, stack).is_some() {
                     alone |= 1 << i;

@@ -589,7 +589,7 @@ impl Bvh {
         if !ray.is_valid() {
             return None;
         }
-        let ray = &ray.from_zero();
+        let ray = &ray.clamped_to_zero();
         let r4 = Ray4::new(ray.origin, ray.dir);
         let pre = K::pre(&r4);
         let mut tfar = ray.tfar;
@@ -628,7 +628,7 @@ impl Bvh {
         if CHECK && !ray.is_valid() {
             return None;
         }
-        self.trace1_from::<ANY, K, CONS>(&ray.from_zero(), self.root, stack)
+        self.trace1_from::<ANY, K, CONS>(&ray.clamped_to_zero(), self.root, stack)
     }
 
     /// [`trace1_with`](Self::trace1_with) over the subtree at `root` (a node or a leaf): the
@@ -1012,7 +1012,7 @@ impl PacketBoxes {
         }
         let slabs = LaneSlabs::of(&o, &d);
         let live_mask = lane_mask(live);
-        // No query reaches behind a ray's origin (`Ray::from_zero`).
+        // No query reaches behind a ray's origin (`Ray::clamped_to_zero`).
         let tnear = live_mask.select(tn.fast_max(Pf::splat(0.0)), inf);
         let tfar = live_mask.select(tf, Pf::splat(f32::NEG_INFINITY));
         // `-0.0 + 0.0` is `+0.0`; lanes out of the query hold `+inf`.
@@ -1120,7 +1120,7 @@ pub(crate) fn each_lane_alone<const ANY: bool, H>(
     while bits != 0 {
         let l = bits.trailing_zeros() as usize;
         bits &= bits - 1;
-        if let Some((th, h)) = walk(l, &Ray { tfar: t[l], ..p.get(l) }.from_zero()) {
+        if let Some((th, h)) = walk(l, &Ray { tfar: t[l], ..p.get(l) }.clamped_to_zero()) {
             hits |= 1 << l;
             if ANY {
                 t[l] = f32::NEG_INFINITY;
