@@ -954,15 +954,30 @@ fn strahl_stream<Q: Query>(scene: &Q, rays: &RayStream, class: Class, hits: &mut
     }
 }
 
+/// Embree's `FLT_LARGE` (1.844e18): its `ray.valid()` asserts that no origin or direction
+/// component exceeds it in magnitude (an abort, in Debian's build).
+pub const EMBREE_LARGE: f32 = 1.844e18;
+
+/// Whether Embree accepts rays with these components (strahl's validity aside).
+#[inline]
+fn embree_range(o: [f32; 3], d: [f32; 3]) -> bool {
+    o.iter().chain(&d).all(|x| x.abs() <= EMBREE_LARGE)
+}
+
 /// Ray `i` of `rays` as Embree's single-ray struct (mask all ones, id `i`), under strahl's rules
 /// for bad rays, which Embree's own checks would abort on (`ray.valid()`): a negative `tnear`
 /// counts as 0, and a ray strahl calls invalid (NaN or infinite fields, a zero direction,
-/// `tnear > tfar`) becomes an empty interval at the origin, which misses and is not occluded.
+/// `tnear > tfar`) becomes an empty interval at the origin, which misses and is not occluded. So
+/// does a ray outside Embree's range (a component beyond [`EMBREE_LARGE`]); strahl answers those
+/// itself (its slab terms saturate), so the two engines may differ there.
 #[inline]
 pub fn embree_ray(rays: &RayStream, i: usize) -> RTCRay {
     let r = rays.get(i);
-    let (o, d, tnear, tfar) =
-        if r.is_valid() { (r.origin, r.dir, r.tnear.max(0.0), r.tfar) } else { (Vec3::ZERO, Vec3::Z, 0.0, 0.0) };
+    let (o, d, tnear, tfar) = if r.is_valid() && embree_range(r.origin.to_array(), r.dir.to_array()) {
+        (r.origin, r.dir, r.tnear.max(0.0), r.tfar)
+    } else {
+        (Vec3::ZERO, Vec3::Z, 0.0, 0.0)
+    };
     RTCRay {
         org_x: o.x,
         org_y: o.y,
@@ -1045,6 +1060,7 @@ pub(crate) fn embree_packet(scene: &embree::Scene, rays: &RayStream, class: Clas
                         && d.iter().all(|&x| f(x))
                         && d.iter().any(|x| x.abs() >= strahl::ray::MIN_DIRECTION)
                         && r.tnear[l] <= r.tfar[l]
+                        && embree_range([r.org_x[l], r.org_y[l], r.org_z[l]], d)
                 };
                 -(ok as i32)
             });

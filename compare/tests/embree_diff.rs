@@ -79,3 +79,36 @@ fn random_small_scenes_disagree_with_embree_only_in_ties() {
     assert_eq!(s.scenes, 300);
     assert!(s.strahl_errors.is_empty(), "{:#?}", s.strahl_errors);
 }
+
+#[test]
+fn bad_rays_reach_neither_engine_as_an_abort() {
+    // Rays Embree's `ray.valid()` would abort on (NaN, a negative tnear, components beyond its
+    // FLT_LARGE) get strahl's rules on both sides (issue 33, finding 8).
+    use glam::Vec3;
+    use strahl::{Ray, RayStream};
+    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/cornell_box.obj");
+    let meshes = strahl::load_obj(&data).unwrap();
+    let scene = strahl::Scene::build(meshes.clone(), &strahl::BuildConfig::default()).unwrap();
+    let pool = compare::pool(2).unwrap();
+    let device = embree::Device::new("threads=2").unwrap();
+    let escene = embree::Scene::build(&device, &meshes, embree::Quality::Medium, false).unwrap();
+    let eye = Vec3::new(278.0, 273.0, -450.0);
+    let rays: RayStream = [
+        Ray::segment(eye, Vec3::Z, -5.0, f32::INFINITY),
+        Ray::segment(eye, Vec3::Z, -5.0, -1.0),
+        Ray::new(Vec3::new(f32::NAN, 0.0, 0.0), Vec3::Z),
+        Ray::new(Vec3::new(0.0, 0.0, -1e21), Vec3::Y),
+        Ray::new(eye, Vec3::new(0.0, 0.0, 3e19)),
+        Ray::new(eye, Vec3::ZERO),
+    ]
+    .into_iter()
+    .collect();
+    for class in [harness::Class::Diffuse, harness::Class::Shadow] {
+        let (s, e) = harness::trace_once(&scene, &escene, &rays, class, &pool);
+        // The first ray hits the back wall from the eye; the others miss.
+        assert!(s.hit(0) && e.hit(0), "{class:?}");
+        for i in 1..rays.len() {
+            assert!(!s.hit(i) && !e.hit(i), "{class:?} ray {i}");
+        }
+    }
+}
