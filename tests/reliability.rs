@@ -326,3 +326,46 @@ fn scene_file_limits_are_typed_errors() {
     let ok = "[mesh.s]\nsphere = { radius = 1.0, stacks = 4, slices = 4 }\n[[instance]]\nmesh = \"s\"\nmatrix = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]\n";
     assert_eq!(strahl::SceneFile::parse(ok, p).unwrap().instances.len(), 1);
 }
+
+/// Found by the differential fuzz target: the closest-hit walk popped a child whose entry
+/// distance lay just beyond `tfar` and skipped it, though the node test (widened by the rounding
+/// bound) had let it in and the triangle's hit lay within `tfar`: occlusion found the hit, closest
+/// hit did not. The pop checks now use the same widened bound as the node tests.
+#[test]
+fn closest_hit_keeps_children_the_widened_test_entered() {
+    let s = |i: f32| i * 2f32.powi(-19);
+    let raw = |x: f32| x;
+    #[rustfmt::skip]
+    let tris: [[[f32; 3]; 3]; 20] = [
+        [[s(0.), s(41.), s(113.)], [s(113.), s(113.), s(64.)], [s(0.), s(3.), s(3.)]],
+        [[s(3.), s(3.), s(-1.)], [s(0.), s(3.), s(-1.)], [s(3.), s(3.), s(3.)]],
+        [[s(8.), s(3.), s(37.)], [s(59.), s(113.), s(113.)], [s(113.), raw(5.473821e-39), s(3.)]],
+        [[s(18.), s(41.), s(75.)], [s(75.), s(39.), s(39.)], [s(39.), s(75.), s(75.)]],
+        [[s(75.), s(39.), s(39.)], [s(39.), s(39.), s(14.)], [s(75.), s(75.), s(75.)]],
+        [[s(0.), s(75.), s(75.)], [s(75.), s(75.), s(75.)], [s(75.), s(75.), s(75.)]],
+        [[s(75.), s(75.), s(39.)], [raw(3.77381e-40), s(0.), s(59.)], [raw(13312048.0), s(75.), s(75.)]],
+        [[s(75.), raw(13323184.0), s(75.)], [s(39.), s(39.), s(39.)], [s(39.), s(75.), s(75.)]],
+        [[s(75.), s(39.), s(39.)], [s(39.), s(75.), s(75.)], [s(75.), s(75.), s(75.)]],
+        [[s(75.), s(75.), s(75.)], [s(75.), s(75.), s(39.)], [s(39.), s(39.), s(39.)]],
+        [[s(75.), s(75.), s(75.)], [s(75.), s(75.), s(75.)], [s(39.), s(39.), s(39.)]],
+        [[s(39.), s(39.), s(39.)], [s(75.), s(75.), s(75.)], [s(75.), s(-80.), s(75.)]],
+        [[s(75.), s(39.), s(39.)], [s(39.), s(39.), s(39.)], [s(39.), s(75.), s(75.)]],
+        [[s(75.), s(75.), s(75.)], [s(75.), s(0.), s(0.)], [s(0.), s(75.), s(75.)]],
+        [[s(75.), s(75.), s(75.)], [s(-112.), s(75.), s(75.)], [s(75.), s(39.), s(39.)]],
+        [[s(75.), s(75.), s(75.)], [s(75.), s(37.), s(37.)], [s(5.), s(75.), s(75.)]],
+        [[s(39.), s(39.), s(39.)], [s(39.), s(39.), s(39.)], [s(39.), s(14.), s(75.)]],
+        [[s(75.), s(75.), s(75.)], [s(0.), s(0.), s(75.)], [s(75.), s(75.), s(75.)]],
+        [[s(75.), s(75.), s(75.)], [s(75.), s(75.), s(39.)], [s(39.), s(75.), s(75.)]],
+        [[s(75.), s(75.), raw(13323083.0)], [s(75.), s(39.), s(39.)], [raw(4.0736475e-17), s(59.), s(0.)]],
+    ];
+    let p: Vec<Vec3> = tris.iter().flatten().map(|&c| Vec3::from(c)).collect();
+    let idx: Vec<[u32; 3]> = (0..20u32).map(|k| [3 * k, 3 * k + 1, 3 * k + 2]).collect();
+    let mesh = TriangleMesh::new("fuzz", p, idx).unwrap();
+    let ray = Ray::segment(Vec3::new(0.0, s(59.0), s(5.0)), Vec3::new(0.0, s(-64.0), 5.439747e-39), 0.0, s(126.0));
+    for config in [BuildConfig::high(), BuildConfig::default()] {
+        for test in TriangleTest::ALL {
+            let scene = Scene::build(vec![mesh.clone()], &config.with_tests(test, BoxTest::Conservative)).unwrap();
+            agrees_with_brute_force(&scene, &[ray], 1e-5, &format!("{test:?}"));
+        }
+    }
+}

@@ -15,7 +15,7 @@
 
 use super::Bvh;
 use super::node::{EMPTY, Node, WIDTH, is_leaf};
-use super::traverse::{BoxTest, Frustum, PacketBoxes, PacketHits, Stack, dispatch, with_stack};
+use super::traverse::{BoxTest, Frustum, PacketBoxes, PacketHits, Stack, WIDEN, dispatch, with_stack};
 use crate::geometry::badouel::Badouel;
 use crate::geometry::moeller::Moller;
 use crate::geometry::triangle::{Kernel, RayK, TriangleTest};
@@ -154,7 +154,10 @@ pub(crate) fn walk_group<const CONS: bool>(
     'pop: while sp > base {
         let mut lanes = stack.lanes_at(sp - 1);
         let (mut cur, dist) = stack.take(&mut sp);
-        if dist > tfar_max {
+        // Held to the frustum test's own widened bound (`Frustum::test_vec`), as the other walks'
+        // pops are (`BoxRay::pop_limit`).
+        let limit = if CONS { tfar_max + (tfar_max.abs() + dist.abs()) * WIDEN + gf.pad } else { tfar_max };
+        if dist > limit {
             continue;
         }
         loop {

@@ -65,7 +65,7 @@ const MIN_RCP_INPUT: f32 = 1e-18;
 const MAX_OD: f32 = 1e37;
 
 /// Relative widening of the far plane distance: 16 ulps, well above the 2–3 roundings involved.
-const WIDEN: f32 = 1.0 / (1u32 << 20) as f32;
+pub(super) const WIDEN: f32 = 1.0 / (1u32 << 20) as f32;
 
 /// The conservative test's factor on far distances, `1 + w` (with `w` = [`WIDEN`]).
 pub(super) const FAR_WIDEN: f32 = 1.0 + WIDEN;
@@ -416,6 +416,10 @@ pub(crate) struct Frustum {
     spread: Nf,
     /// Whether the packet's `tnear` is non-negative: integer minima and maxima (see [`BitOrder`]).
     int_ok: bool,
+    /// The conservative test's absolute widening: `w · max |o · r|` over the axes. `(b − o)·r`
+    /// cancels where the origin lies near a box plane, so a relative widening alone missed hits
+    /// there (a ray starting on a triangle, found by the differential fuzz target).
+    pub(super) pad: f32,
 }
 
 /// Inner nodes reached below a node smaller than the packet's footprint carry this bit on the
@@ -455,6 +459,7 @@ impl Frustum {
             tnear: Nf::splat(hmin(tnear)),
             spread: Nf::splat(0.0),
             int_ok: false,
+            pad: 0.0,
         };
         // `-0.0 + 0.0` is `+0.0`, which orders right as bits.
         let t0 = f.tnear.to_array()[0];
@@ -478,7 +483,20 @@ impl Frustum {
             f.rmax[a] = Nf::splat(rmax);
         }
         f.spread = Nf::splat(spread * FOOTPRINT_FACTOR);
+        f.pad = Self::pad_of(&f.o, &f.rmin, &f.rmax);
         Some(f)
+    }
+
+    /// [`pad`](Self::pad) for origin `o` and reciprocal ranges `rmin..rmax` (finite: the
+    /// reciprocals are clamped, and a saturated product stays below `f32::MAX`).
+    fn pad_of(o: &[Nf; 3], rmin: &[Nf; 3], rmax: &[Nf; 3]) -> f32 {
+        (0..3)
+            .map(|a| {
+                let o = o[a].to_array()[0].abs();
+                (o * rmin[a].to_array()[0].abs().max(rmax[a].to_array()[0].abs())).min(MAX_OD)
+            })
+            .fold(0.0f32, f32::max)
+            * WIDEN
     }
 
     /// Children that some ray of the packet may enter before `tfar_max`, and the lowest entry of each.
@@ -510,7 +528,7 @@ impl Frustum {
             n(0).fast_max(n(1)).fast_max(n(2).fast_max(self.tnear))
         };
         // Widen by the rounding of the subtraction and product (relative), as in the per-ray test.
-        let tf = if CONS { tf + (tn.abs() + tf.abs()) * Nf::splat(WIDEN) } else { tf };
+        let tf = if CONS { tf + (tn.abs() + tf.abs()) * Nf::splat(WIDEN) + Nf::splat(self.pad) } else { tf };
         let mask = if self.int_ok { tn.le_mask(tf) } else { tn.simd_le(tf) };
         (mask, tn)
     }
@@ -530,6 +548,7 @@ impl Frustum {
             tnear: self.tnear.fast_min(other.tnear),
             spread: self.spread,
             int_ok: self.int_ok && other.int_ok,
+            pad: 0.0,
         };
         for a in 0..3 {
             if self.o[a].to_array()[0] != other.o[a].to_array()[0] {
@@ -541,6 +560,7 @@ impl Frustum {
             spread = spread.max((1.0 / rmin - 1.0 / rmax).abs());
         }
         f.spread = Nf::splat(spread * FOOTPRINT_FACTOR);
+        f.pad = Self::pad_of(&f.o, &f.rmin, &f.rmax);
         Some(f)
     }
 
@@ -862,6 +882,15 @@ impl BoxRay {
         }
     }
 
+    /// The bound a popped entry's distance is held to: the far limit of the node test that
+    /// pushed it (widened by the rounding bound for the conservative test). Comparing with `tfar`
+    /// itself dropped children the widened test had entered, whose hits lay within `tfar` (found
+    /// by the differential fuzz target: occlusion found a hit closest hit missed).
+    #[inline(always)]
+    pub(crate) fn pop_limit<const CONS: bool>(&self, tfar: f32) -> f32 {
+        if CONS { tfar.mul_add(FAR_WIDEN, self.far_pad) } else { tfar }
+    }
+
     /// The children of `node` the ray enters before `tfar`, and the entry distance of each.
     #[inline(always)]
     fn test<const CONS: bool>(&self, node: &Node, tfar: f32) -> (u32, Nf) {
@@ -924,8 +953,8 @@ pub(crate) fn walk1<const ANY: bool, const CONS: bool>(
     let mut sp = stack.len;
     'pop: while sp > base {
         let (mut cur, dist) = stack.take(&mut sp);
-        // Skip subtrees entered beyond the closest hit so far.
-        if dist > *tfar {
+        // Skip subtrees entered beyond the closest hit so far (by the node test's own bound).
+        if dist > br.pop_limit::<CONS>(*tfar) {
             continue;
         }
         loop {
@@ -1159,6 +1188,14 @@ pub(crate) fn walk_packet<const ANY: bool, const CONS: bool>(
 ) {
     let Tree { nodes, blocks, far_memory } = tree;
     let mut tfar_max = hmax(*tfar);
+    // Popped entries are held to the node tests' own widened bounds (see `BoxRay::pop_limit`):
+    // per lane `tfar·(1 + w) + pad`, and for the packet's lowest entry the largest of those (the
+    // frustum test's relative widening, `(|tn| + |tf|)·w`, lies within twice that).
+    let max_pad = if CONS { hmax(pb.slabs.pad).max(pb.frustum.as_ref().map_or(0.0, |f| f.pad)) } else { 0.0 };
+    let pop_limit = |tfar_max: f32, dist: f32| {
+        if CONS { tfar_max + (tfar_max.abs() + dist.abs()) * (2.0 * WIDEN) + max_pad } else { tfar_max }
+    };
+    let lane_limit = |tfar: Pf| if CONS { tfar.mul_add(Pf::splat(FAR_WIDEN), pb.slabs.pad) } else { tfar };
     // Camera packets (with a frustum) never switch to single rays; their entries' lane masks are
     // not kept.
     let switch = pb.frustum.is_none();
@@ -1170,7 +1207,7 @@ pub(crate) fn walk_packet<const ANY: bool, const CONS: bool>(
         // `tnear` decides as well (and the 64-byte copies cost shadow packets 3–8%).
         let mut lane_tn = if ANY { pb.tnear } else { stack.lane_dist_at(sp - 1) };
         let (mut cur, dist) = stack.take(&mut sp);
-        if dist > tfar_max {
+        if dist > pop_limit(tfar_max, dist) {
             continue;
         }
         loop {
@@ -1180,7 +1217,7 @@ pub(crate) fn walk_packet<const ANY: bool, const CONS: bool>(
             // (single rays at leaves lost 2–6% on Sponza and igea).
             let mut single = 0;
             if switch && lanes != 0 {
-                let open = lanes & lane_tn.simd_le(*tfar).to_bitmask();
+                let open = lanes & lane_tn.simd_le(lane_limit(*tfar)).to_bitmask();
                 if open == 0 {
                     continue 'pop;
                 }
