@@ -369,3 +369,43 @@ fn closest_hit_keeps_children_the_widened_test_entered() {
         }
     }
 }
+
+/// Found by the differential fuzz target (no flush-to-zero): a tiny determinant let `tfar·|det|`
+/// round up to the smallest denormal, and Möller–Trumbore reported `t` ≈ 2·`tfar`. Every hit now
+/// lies within `tfar` once divided, whatever the floating-point mode.
+#[test]
+fn hits_stay_within_tfar_when_the_scaled_test_underflows() {
+    let s = |i: f32| i * 2f32.powi(-52);
+    let raw = |x: f32| x;
+    #[rustfmt::skip]
+    let tris: [[[f32; 3]; 3]; 8] = [
+        [[s(0.), s(-85.), s(59.)], [s(113.), s(113.), s(64.)], [s(0.), s(3.), s(3.)]],
+        [[s(3.), s(3.), s(-1.)], [s(0.), s(3.), f32::NAN], [s(3.), s(3.), s(3.)]],
+        [[s(3.), s(3.), s(37.)], [s(113.), s(113.), s(113.)], [s(4.), raw(2.1381e-41), s(3.)]],
+        [[s(3.), s(3.), s(3.)], [s(3.), s(59.), s(0.)], [s(37.), s(3.), s(3.)]],
+        [[s(0.), s(59.), s(113.)], [s(113.), s(113.), raw(5.473821e-39)], [s(3.), s(3.), s(3.)]],
+        [[s(3.), s(3.), s(0.)], [s(27.), s(37.), s(0.)], [s(0.), s(0.), s(113.)]],
+        [[s(35.), s(4.), raw(2.1381e-41)], [s(3.), s(3.), s(35.)], [s(3.), s(3.), s(3.)]],
+        [[s(3.), s(0.), s(45.)], [s(3.), s(3.), s(113.)], [s(113.), s(39.), raw(0.0019531387)]],
+    ];
+    let p: Vec<Vec3> = tris.iter().flatten().map(|&c| Vec3::from(c)).collect();
+    let idx: Vec<[u32; 3]> = (0..8u32).map(|k| [3 * k, 3 * k + 1, 3 * k + 2]).collect();
+    let mesh = TriangleMesh::new("fuzz", p, idx).unwrap();
+    let ray = Ray::segment(Vec3::splat(s(3.0)), Vec3::new(s(39.0), 0.0019531387, s(3.0)), 3.8500897e-37, s(3.0));
+    for config in [BuildConfig::high(), BuildConfig::default()] {
+        for test in TriangleTest::ALL {
+            let scene = Scene::build(vec![mesh.clone()], &config.with_tests(test, BoxTest::Conservative)).unwrap();
+            let mut hp = HitPacket::default();
+            scene.intersect_packet(&RayPacket::from_rays(&[ray]), &mut hp);
+            for h in [scene.intersect(&ray), scene.intersect_brute_force(&ray), hp.get(0)].into_iter().flatten() {
+                assert!(
+                    h.t > ray.tnear && h.t <= ray.tfar,
+                    "{test:?}: t {} outside ({}, {}]",
+                    h.t,
+                    ray.tnear,
+                    ray.tfar
+                );
+            }
+        }
+    }
+}

@@ -42,7 +42,7 @@ impl Kernel for Moller {
         }
         let inv = f32x4::splat(1.0) / abs_den;
         let t = tt * inv;
-        nearest(valid & sane(inv, t, f32x4::splat(tnear)), t, u * inv, v * inv)
+        nearest(valid & sane(inv, t, f32x4::splat(tnear), f32x4::splat(tfar)), t, u * inv, v * inv)
     }
 
     #[inline(always)]
@@ -67,6 +67,6 @@ impl Kernel for Moller {
         let valid = valid & (abs_den * r.tnear).simd_lt(tt) & tt.simd_le(abs_den * tfar);
         let inv = Pf::splat(1.0) / abs_den;
         let t = tt * inv;
-        (valid & sane(inv, t, r.tnear), t, u * inv, v * inv)
+        (valid & sane(inv, t, r.tnear, tfar), t, u * inv, v * inv)
     }
 }

@@ -173,31 +173,32 @@ pub(crate) trait Kernel {
 /// The last checks of a hit whose depth test passed in its scaled form (`tnear·|den| < t·|den|`):
 /// the reciprocal `inv` of the determinant is finite (a determinant near 1e-38 would make the
 /// barycentrics `u·inv` infinite or NaN), and `t = t_scaled·inv` is finite and still above
-/// `tnear` once divided (a huge determinant — directions near 1e34 — rounds a tiny `t` to 0, a hit
-/// outside the interval `(tnear, tfar]`).
+/// `tnear` and at most `tfar` once divided (a huge determinant — directions near 1e34 — rounds a
+/// tiny `t` to 0; a tiny one, without flush-to-zero, lets `tfar·|det|` round up to the smallest
+/// denormal and a `t` of twice `tfar` through: hits outside the interval `(tnear, tfar]`).
 #[inline(always)]
-pub(crate) fn sane<V: SaneLanes>(inv: V, t: V, tnear: V) -> V {
-    V::sane(inv, t, tnear)
+pub(crate) fn sane<V: SaneLanes>(inv: V, t: V, tnear: V, tfar: V) -> V {
+    V::sane(inv, t, tnear, tfar)
 }
 
 /// [`sane`] for the block (4 lanes) and packet (16 lanes) forms.
 pub(crate) trait SaneLanes: Copy {
-    fn sane(inv: Self, t: Self, tnear: Self) -> Self;
+    fn sane(inv: Self, t: Self, tnear: Self, tfar: Self) -> Self;
 }
 
 impl SaneLanes for f32x4 {
     #[inline(always)]
-    fn sane(inv: Self, t: Self, tnear: Self) -> Self {
+    fn sane(inv: Self, t: Self, tnear: Self, tfar: Self) -> Self {
         let inf = f32x4::splat(f32::INFINITY);
-        inv.abs().simd_lt(inf) & t.simd_lt(inf) & tnear.simd_lt(t)
+        inv.abs().simd_lt(inf) & t.simd_lt(inf) & tnear.simd_lt(t) & t.simd_le(tfar)
     }
 }
 
 impl SaneLanes for Pf {
     #[inline(always)]
-    fn sane(inv: Self, t: Self, tnear: Self) -> Self {
+    fn sane(inv: Self, t: Self, tnear: Self, tfar: Self) -> Self {
         let inf = Pf::splat(f32::INFINITY);
-        inv.abs().simd_lt(inf) & t.simd_lt(inf) & tnear.simd_lt(t)
+        inv.abs().simd_lt(inf) & t.simd_lt(inf) & tnear.simd_lt(t) & t.simd_le(tfar)
     }
 }
 

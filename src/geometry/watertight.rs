@@ -102,7 +102,7 @@ impl Kernel for Watertight {
         }
         let inv = f32x4::splat(1.0) / det;
         let t = t_s / abs_det;
-        nearest(valid & sane(inv, t, f32x4::splat(tnear)), t, v * inv, w * inv)
+        nearest(valid & sane(inv, t, f32x4::splat(tnear), f32x4::splat(tfar)), t, v * inv, w * inv)
     }
 
     /// All lanes at once: each lane's axis permutation and shear are selected by mask, so the
@@ -156,6 +156,6 @@ impl Kernel for Watertight {
         let valid = valid & (abs_det * r.tnear).simd_lt(t_s) & t_s.simd_le(abs_det * tfar);
         let inv = Pf::splat(1.0) / det;
         let t = t_s / abs_det;
-        (valid & sane(inv, t, r.tnear), t, v * inv, w * inv)
+        (valid & sane(inv, t, r.tnear, tfar), t, v * inv, w * inv)
     }
 }
