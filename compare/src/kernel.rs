@@ -8,7 +8,8 @@
 //!   64-byte-aligned `RTCRayHit16` / `RTCRay16` with their valid masks (`rtcIntersect16`); the
 //!   records are copied from pristine ones before each pass (untimed) and answered in place.
 //!
-//! The answers are read back after the timed region ([`Native::answers`]).
+//! The answers are read back after the timed region ([`StrahlNative::answers`],
+//! [`EmbreeNative::answers`]).
 
 use rayon::prelude::*;
 use strahl::{Hit, HitPacket, HitStream, PACKET_WIDTH, Query, Ray, RayPacket, RayStream};
