@@ -882,7 +882,7 @@ impl BoxRay {
         }
     }
 
-    /// The bound a popped entry's distance is held to: the far limit of the node test that
+    /// The node test's far limit, and the bound a popped entry's distance is held to: the far limit of the node test that
     /// pushed it (widened by the rounding bound for the conservative test). Comparing with `tfar`
     /// itself dropped children the widened test had entered, whose hits lay within `tfar` (found
     /// by the differential fuzz target: occlusion found a hit closest hit missed).
@@ -899,7 +899,7 @@ impl BoxRay {
         let (n0, n1, n2) = (near(0), near(1), near(2));
         let (f0, f1, f2, tf) = if CONS {
             let far = |a: usize| Nf::new(b[self.far[a]]).mul_sub(self.rdf[a], self.odf[a]);
-            (far(0), far(1), far(2), Nf::splat(tfar.mul_add(FAR_WIDEN, self.far_pad)))
+            (far(0), far(1), far(2), Nf::splat(self.pop_limit::<CONS>(tfar)))
         } else {
             let far = |a: usize| Nf::new(b[self.far[a]]).mul_sub(self.rd[a], self.od[a]);
             (far(0), far(1), far(2), Nf::splat(tfar))
