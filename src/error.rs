@@ -33,6 +33,10 @@ pub enum Error {
     MixedTests,
     #[error("instance {instance} has a transform that is not finite and invertible")]
     BadTransform { instance: usize },
+    #[error("render settings: {0}")]
+    RenderSettings(String),
+    #[error("cannot write image {path}: {message}")]
+    ImageWrite { path: PathBuf, message: String },
     #[error("scene has {0} geometries; at most 2^32 - 1 are supported (2^29 with the Badouel test)")]
     TooManyGeometries(usize),
 }

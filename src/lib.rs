@@ -36,6 +36,7 @@ pub mod instance;
 pub mod procedural;
 pub mod ray;
 pub mod raygen;
+pub mod render;
 pub mod scene;
 pub mod scene_file;
 pub mod simd;
@@ -48,8 +49,9 @@ pub use error::{Error, Result};
 pub use geometry::{MAX_COORDINATE, TriangleMesh, TriangleTest, exact_hit, intersect_triangle, load_obj, parse_obj};
 pub use instance::{Instance, InstancedScene, InstancedStats};
 pub use ray::{Hit, HitPacket, HitStream, INVALID_ID, PACKET_WIDTH, Ray, RayPacket, RayStream, offset_ray_origin};
+pub use render::Light;
 pub use scene::{Coherence, Query, STREAM_CHUNK, Scene};
-pub use scene_file::{Light, SceneFile};
+pub use scene_file::SceneFile;
 
 /// The README's code examples run as doctests.
 #[cfg(doctest)]

@@ -309,6 +309,15 @@ impl RayStream {
         self.len() == 0
     }
 
+    /// Removes every ray, keeping the allocations.
+    pub fn clear(&mut self) {
+        for v in [&mut self.ox, &mut self.oy, &mut self.oz, &mut self.dx, &mut self.dy, &mut self.dz] {
+            v.clear();
+        }
+        self.tnear.clear();
+        self.tfar.clear();
+    }
+
     pub fn push(&mut self, r: &Ray) {
         self.ox.push(r.origin.x);
         self.oy.push(r.origin.y);

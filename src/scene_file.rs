@@ -57,6 +57,9 @@ use crate::geometry::{TriangleMesh, load_obj};
 use crate::instance::{Instance, InstancedScene};
 use crate::procedural;
 use crate::raygen::Pcg32;
+use crate::render::{
+    FresnelMode, Light, LightKind, Material, Projection, RenderCamera, Settings, Surfaces, Texture, World,
+};
 
 /// Largest scene file read, in bytes.
 pub const MAX_SCENE_FILE_BYTES: u64 = 64 << 20;
@@ -73,25 +76,41 @@ fn sphere_triangles(stacks: u32, slices: u32) -> u64 {
     2 * slices.max(3) as u64 * (stacks.max(2) as u64 - 1)
 }
 
-/// A point light.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Light {
-    pub position: Vec3,
-    pub color: Vec3,
-}
-
 /// The camera of a scene file.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CameraSpec {
     pub eye: Vec3,
     pub look_at: Vec3,
     pub up: Vec3,
+    /// The benchmark camera's field of view (both ways) and the pinhole's horizontal one.
     pub fov_deg: f32,
+    /// The renderer's projection.
+    pub projection: Projection,
 }
 
 impl CameraSpec {
+    /// The benchmark's square pinhole camera (`../shared/BENCHMARKING.md`).
     pub fn camera(&self) -> Camera {
         Camera::look_at(self.eye, self.look_at, self.up, self.fov_deg)
+    }
+
+    /// The renderer's camera (checked when the file was read).
+    pub fn render_camera(&self) -> Option<RenderCamera> {
+        RenderCamera::look_at(self.eye, self.look_at, self.up, self.projection)
+    }
+}
+
+/// The `[render]` table: image size, sampling, recursion and environment.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RenderSpec {
+    pub settings: Settings,
+    pub ambient: Vec3,
+    pub background: Vec3,
+}
+
+impl Default for RenderSpec {
+    fn default() -> Self {
+        Self { settings: Settings::default(), ambient: Vec3::ONE, background: Vec3::ZERO }
     }
 }
 
@@ -104,6 +123,10 @@ pub enum MeshSource {
     Sphereflake { levels: u32, stacks: u32, slices: u32 },
     /// [`procedural::uv_sphere`] at the origin.
     Sphere { radius: f32, stacks: u32, slices: u32 },
+    /// [`procedural::cuboid`]: an axis-aligned box, 12 triangles.
+    Box { min: Vec3, max: Vec3 },
+    /// [`procedural::quad`]: a rectangle in the plane y = 0 facing +y, centred on the origin.
+    Quad { size: [f32; 2] },
 }
 
 impl MeshSource {
@@ -117,6 +140,8 @@ impl MeshSource {
             MeshSource::Sphere { radius, stacks, slices } => {
                 vec![procedural::uv_sphere(Vec3::ZERO, radius, stacks, slices)]
             }
+            MeshSource::Box { min, max } => vec![procedural::cuboid(min, max)],
+            MeshSource::Quad { size } => vec![procedural::quad(size[0], size[1])],
         })
     }
 }
@@ -130,6 +155,14 @@ pub struct SceneFile {
     pub instances: Vec<Instance>,
     pub camera: Option<CameraSpec>,
     pub lights: Vec<Light>,
+    /// Materials: index 0 is the default [`Material`], then the `[material.*]` tables in name
+    /// order.
+    pub materials: Vec<(String, Material)>,
+    /// Per mesh (in `meshes` order): its material index and whether it is shaded smooth.
+    pub mesh_shading: Vec<(u32, bool)>,
+    /// Per instance: the material overriding its mesh's, if any.
+    pub instance_materials: Vec<Option<u32>>,
+    pub render: RenderSpec,
 }
 
 impl SceneFile {
@@ -149,11 +182,32 @@ impl SceneFile {
         let err = |message: String| Error::SceneFile { path: path.to_path_buf(), message };
         let raw: RawFile = toml::from_str(text).map_err(|e| err(e.to_string()))?;
         let base = path.parent().unwrap_or(Path::new("."));
+        let mut materials = vec![("default".to_string(), Material::default())];
+        for (name, m) in &raw.material {
+            let mat = m.material().map_err(|e| err(format!("material `{name}`: {e}")))?;
+            materials.push((name.clone(), mat));
+        }
+        let material =
+            |name: &Option<String>, what: &str| -> Result<Option<u32>> {
+                match name {
+                    None => Ok(None),
+                    Some(n) => materials.iter().position(|(m, _)| m == n).map(|i| Some(i as u32)).ok_or_else(|| {
+                        err(format!("{what} names material `{n}`, which no [material.{n}] table defines"))
+                    }),
+                }
+            };
         let mut meshes = Vec::new();
+        let mut mesh_shading = Vec::new();
         for (name, m) in &raw.mesh {
-            let sources = m.obj.is_some() as u32 + m.sphereflake.is_some() as u32 + m.sphere.is_some() as u32;
+            let sources = m.obj.is_some() as u32
+                + m.sphereflake.is_some() as u32
+                + m.sphere.is_some() as u32
+                + m.cuboid.is_some() as u32
+                + m.quad.is_some() as u32;
             if sources != 1 {
-                return Err(err(format!("mesh `{name}` needs exactly one of `obj`, `sphereflake`, `sphere`")));
+                return Err(err(format!(
+                    "mesh `{name}` needs exactly one of `obj`, `sphereflake`, `sphere`, `box`, `quad`"
+                )));
             }
             let too_many = |tris: f64| {
                 err(format!(
@@ -170,6 +224,22 @@ impl SceneFile {
                     return Err(too_many(tris));
                 }
                 MeshSource::Sphereflake { levels: s.levels, stacks: s.stacks, slices: s.slices }
+            } else if let Some(b) = &m.cuboid {
+                let (min, max) = (Vec3::from(b.min), Vec3::from(b.max));
+                let lim = crate::MAX_COORDINATE;
+                if !(min.cmplt(max).all() && min.abs().max_element() <= lim && max.abs().max_element() <= lim) {
+                    return Err(err(format!("mesh `{name}`: box min {min} must lie below max {max}, within ±{lim:e}")));
+                }
+                MeshSource::Box { min, max }
+            } else if let Some(q) = &m.quad {
+                let lim = crate::MAX_COORDINATE;
+                if !q.size.iter().all(|&v| v > 0.0 && v <= lim) {
+                    return Err(err(format!(
+                        "mesh `{name}`: quad size {:?} must be positive, at most {lim:e}",
+                        q.size
+                    )));
+                }
+                MeshSource::Quad { size: q.size }
             } else {
                 let s = m.sphere.as_ref().expect("counted above");
                 if !(s.radius.is_finite() && s.radius > 0.0 && s.radius <= 0.5 * crate::MAX_COORDINATE) {
@@ -185,6 +255,9 @@ impl SceneFile {
                 }
                 MeshSource::Sphere { radius: s.radius, stacks: s.stacks, slices: s.slices }
             };
+            let smooth =
+                m.smooth.unwrap_or(matches!(source, MeshSource::Sphere { .. } | MeshSource::Sphereflake { .. }));
+            mesh_shading.push((material(&m.material, &format!("mesh `{name}`"))?.unwrap_or(0), smooth));
             meshes.push((name.clone(), source));
         }
         let index = |mesh: &str, what: &str| {
@@ -209,9 +282,12 @@ impl SceneFile {
         }
         let mut instances = Vec::new();
         instances.try_reserve_exact(total as usize).map_err(|e| err(format!("{total} instances: {e}")))?;
+        let mut instance_materials = Vec::new();
+        instance_materials.try_reserve_exact(total as usize).map_err(|e| err(format!("{total} instances: {e}")))?;
         for (i, inst) in raw.instance.iter().enumerate() {
             let what = format!("instance {i}");
             let object = index(&inst.mesh, &what)?;
+            instance_materials.push(material(&inst.material, &what)?);
             let transform = match &inst.matrix {
                 Some(rows) => {
                     if inst.translate.is_some() || inst.rotate.is_some() || inst.scale.is_some() {
@@ -247,6 +323,7 @@ impl SceneFile {
         for (g, grid) in raw.grid.iter().enumerate() {
             let what = format!("grid {g}");
             let object = index(&grid.mesh, &what)?;
+            let grid_material = material(&grid.material, &what)?;
             let n = grid.count;
             let spacing = Vec3::from(grid.spacing);
             let origin = grid.origin.map_or(Vec3::ZERO, Vec3::from);
@@ -266,41 +343,89 @@ impl SceneFile {
                         let transform = trs(cell, Vec3::new(0.0, yaw, 0.0), Vec3::splat(s));
                         check_transform(&transform).map_err(|m| err(format!("{what}: {m}")))?;
                         instances.push(Instance::new(object, transform));
+                        instance_materials.push(grid_material);
                     }
                 }
             }
         }
-        let camera = raw.camera.map(|c| CameraSpec {
-            eye: c.eye.into(),
-            look_at: c.look_at.into(),
-            up: c.up.map_or(Vec3::Y, Vec3::from),
-            fov_deg: c.fov.unwrap_or(60.0),
-        });
-        if let Some(c) = &camera {
-            let f = c.look_at - c.eye;
-            if !(f.is_finite() && c.up.is_finite())
-                || f.cross(c.up).length_squared() == 0.0
-                || !(c.fov_deg > 0.0 && c.fov_deg < 180.0)
-            {
-                return Err(err("camera: eye, look_at and up must span a view, and fov lie in (0, 180)".into()));
+        let camera = match raw.camera {
+            None => None,
+            Some(c) => {
+                let fov_deg = c.fov.unwrap_or(60.0);
+                let projection = match c.projection.as_deref().unwrap_or("pinhole") {
+                    "pinhole" => Projection::Pinhole { fov_deg },
+                    "orthographic" => Projection::Orthographic { width: c.width.unwrap_or(1.0) },
+                    "fisheye" => Projection::Fisheye { fov_deg: c.fov.unwrap_or(180.0) },
+                    "omnimax" => Projection::Omnimax,
+                    "panorama" => Projection::Panorama,
+                    other => {
+                        return Err(err(format!(
+                            "camera: projection `{other}` is none of pinhole, orthographic, fisheye, omnimax, panorama"
+                        )));
+                    }
+                };
+                let spec = CameraSpec {
+                    eye: c.eye.into(),
+                    look_at: c.look_at.into(),
+                    up: c.up.map_or(Vec3::Y, Vec3::from),
+                    fov_deg,
+                    projection,
+                };
+                let f = spec.look_at - spec.eye;
+                if !(f.is_finite() && spec.up.is_finite())
+                    || f.cross(spec.up).length_squared() == 0.0
+                    || !(fov_deg > 0.0 && fov_deg < 180.0 || matches!(projection, Projection::Fisheye { .. }))
+                    || spec.render_camera().is_none()
+                {
+                    return Err(err(
+                        "camera: eye, look_at and up must span a view, and fov lie in (0, 180) (fisheye: (0, 360]; orthographic width > 0)".into(),
+                    ));
+                }
+                Some(spec)
             }
-        }
+        };
         let mut lights = Vec::with_capacity(raw.light.len());
         for (i, l) in raw.light.iter().enumerate() {
-            let light = Light { position: l.position.into(), color: l.color.map_or(Vec3::ONE, Vec3::from) };
-            if !(light.position.is_finite() && light.position.abs().max_element() <= crate::MAX_COORDINATE) {
-                return Err(err(format!(
-                    "light {i}: position {} must be finite and within ±{:e}",
-                    light.position,
-                    crate::MAX_COORDINATE
-                )));
-            }
-            if !(light.color.is_finite() && light.color.min_element() >= 0.0) {
-                return Err(err(format!("light {i}: color {} must be finite and not negative", light.color)));
-            }
+            let light = l.light().map_err(|m| err(format!("light {i}: {m}")))?;
+            light.check().map_err(|m| err(format!("light {i}: {m}")))?;
             lights.push(light);
         }
-        Ok(Self { path: path.to_path_buf(), meshes, instances, camera, lights })
+        let render = match raw.render {
+            None => RenderSpec::default(),
+            Some(r) => {
+                let d = RenderSpec::default();
+                let spec = RenderSpec {
+                    settings: Settings {
+                        width: r.width.unwrap_or(d.settings.width),
+                        height: r.height.unwrap_or(d.settings.height),
+                        spp: r.spp.unwrap_or(d.settings.spp),
+                        max_depth: r.max_depth.unwrap_or(d.settings.max_depth),
+                        bailout: r.bailout.unwrap_or(d.settings.bailout),
+                        seed: r.seed.unwrap_or(d.settings.seed),
+                    },
+                    ambient: r.ambient.map_or(d.ambient, Rgb::vec),
+                    background: r.background.map_or(d.background, Rgb::vec),
+                };
+                spec.settings.check().map_err(|e| err(format!("[render]: {e}")))?;
+                for (name, c) in [("ambient", spec.ambient), ("background", spec.background)] {
+                    if !(c.is_finite() && c.min_element() >= 0.0) {
+                        return Err(err(format!("[render]: {name} {c} must be finite and not negative")));
+                    }
+                }
+                spec
+            }
+        };
+        Ok(Self {
+            path: path.to_path_buf(),
+            meshes,
+            instances,
+            camera,
+            lights,
+            materials,
+            mesh_shading,
+            instance_materials,
+            render,
+        })
     }
 
     /// Loads or generates every mesh (one object per `[mesh.*]` table, in name order).
@@ -311,6 +436,26 @@ impl SceneFile {
     /// Loads the meshes and builds the two-level scene.
     pub fn build(&self, config: &BuildConfig) -> Result<InstancedScene> {
         InstancedScene::build(self.load_objects()?, self.instances.clone(), config)
+    }
+
+    /// The renderer's view of the scene, from the objects [`load_objects`](Self::load_objects)
+    /// returned: materials per mesh and instance, normals, lights and environment.
+    pub fn world(&self, objects: &[Vec<TriangleMesh>]) -> Result<World> {
+        let objs: Vec<Vec<(&TriangleMesh, u32, bool)>> = objects
+            .iter()
+            .zip(&self.mesh_shading)
+            .map(|(meshes, &(m, smooth))| meshes.iter().map(|g| (g, m, smooth)).collect())
+            .collect();
+        let placed: Vec<_> = self.instances.iter().copied().zip(self.instance_materials.iter().copied()).collect();
+        let world = World {
+            surfaces: Surfaces::new(&objs, &placed),
+            materials: self.materials.iter().map(|(_, m)| *m).collect(),
+            lights: self.lights.clone(),
+            ambient: self.render.ambient,
+            background: self.render.background,
+        };
+        world.check().map_err(|e| Error::SceneFile { path: self.path.clone(), message: e.to_string() })?;
+        Ok(world)
     }
 }
 
@@ -328,6 +473,9 @@ fn check_transform(m: &Affine3A) -> std::result::Result<(), String> {
 #[serde(deny_unknown_fields)]
 struct RawFile {
     camera: Option<RawCamera>,
+    render: Option<RawRender>,
+    #[serde(default)]
+    material: BTreeMap<String, RawMaterial>,
     #[serde(default)]
     light: Vec<RawLight>,
     #[serde(default)]
@@ -345,13 +493,138 @@ struct RawCamera {
     look_at: [f32; 3],
     up: Option<[f32; 3]>,
     fov: Option<f32>,
+    projection: Option<String>,
+    width: Option<f32>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawRender {
+    width: Option<u32>,
+    height: Option<u32>,
+    spp: Option<u32>,
+    max_depth: Option<u32>,
+    bailout: Option<f32>,
+    seed: Option<u64>,
+    ambient: Option<Rgb>,
+    background: Option<Rgb>,
 }
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawLight {
-    position: [f32; 3],
-    color: Option<[f32; 3]>,
+    kind: Option<String>,
+    position: Option<[f32; 3]>,
+    color: Option<Rgb>,
+    intensity: Option<f32>,
+    direction: Option<[f32; 3]>,
+    /// Spot: full intensity within this half-angle (degrees).
+    radius: Option<f32>,
+    /// Spot: no light beyond this half-angle (degrees).
+    falloff: Option<f32>,
+    fade: Option<f32>,
+}
+
+impl RawLight {
+    fn light(&self) -> std::result::Result<Light, String> {
+        let color = self.color.map_or(Vec3::ONE, Rgb::vec) * self.intensity.unwrap_or(1.0);
+        let dir = || -> std::result::Result<Vec3, String> {
+            let d = Vec3::from(self.direction.ok_or("needs a `direction`")?);
+            let n = d.normalize_or_zero();
+            if n == Vec3::ZERO || !n.is_finite() {
+                return Err(format!("direction {d} must be finite and non-zero"));
+            }
+            Ok(n)
+        };
+        let position = || self.position.map(Vec3::from).ok_or_else(|| "needs a `position`".to_string());
+        let kind = self.kind.as_deref().unwrap_or("point");
+        let (position, kind) = match kind {
+            "point" => (position()?, LightKind::Point),
+            "directional" => (Vec3::ZERO, LightKind::Directional { direction: dir()? }),
+            "spot" => {
+                let radius = self.radius.unwrap_or(30.0);
+                let falloff = self.falloff.unwrap_or(radius.max(45.0));
+                if !(radius >= 0.0 && radius <= falloff && falloff < 180.0) {
+                    return Err(format!(
+                        "spot radius {radius}° and falloff {falloff}° need 0 ≤ radius ≤ falloff < 180"
+                    ));
+                }
+                let kind = LightKind::Spot {
+                    direction: dir()?,
+                    cos_inner: radius.to_radians().cos(),
+                    cos_outer: falloff.to_radians().cos(),
+                };
+                (position()?, kind)
+            }
+            other => return Err(format!("kind `{other}` is none of point, directional, spot")),
+        };
+        Ok(Light { position, color, kind, fade: self.fade })
+    }
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawMaterial {
+    color: Option<Rgb>,
+    ambient: Option<Rgb>,
+    specular: Option<Rgb>,
+    shininess: Option<f32>,
+    reflect: Option<Rgb>,
+    transmit: Option<Rgb>,
+    ior: Option<f32>,
+    absorption: Option<Rgb>,
+    fresnel: Option<String>,
+    checker: Option<RawChecker>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawChecker {
+    color: Rgb,
+    size: f32,
+}
+
+impl RawMaterial {
+    fn material(&self) -> std::result::Result<Material, String> {
+        let d = Material::default();
+        let fresnel = match self.fresnel.as_deref().unwrap_or("exact") {
+            "exact" => FresnelMode::Exact,
+            "schlick" => FresnelMode::Schlick,
+            "off" => FresnelMode::Off,
+            other => return Err(format!("fresnel `{other}` is none of exact, schlick, off")),
+        };
+        let m = Material {
+            ambient: self.ambient.map_or(d.ambient, Rgb::vec),
+            diffuse: self.color.map_or(d.diffuse, Rgb::vec),
+            specular: self.specular.map_or(d.specular, Rgb::vec),
+            shininess: self.shininess.unwrap_or(d.shininess),
+            reflect: self.reflect.map_or(d.reflect, Rgb::vec),
+            transmit: self.transmit.map_or(d.transmit, Rgb::vec),
+            ior: self.ior.unwrap_or(if self.transmit.is_some() { 1.5 } else { d.ior }),
+            absorption: self.absorption.map_or(d.absorption, Rgb::vec),
+            fresnel,
+            texture: self.checker.as_ref().map(|c| Texture::Checker { other: c.color.vec(), size: c.size }),
+        };
+        m.check()?;
+        Ok(m)
+    }
+}
+
+/// A colour as one number (grey) or three.
+#[derive(Clone, Copy, Deserialize)]
+#[serde(untagged)]
+enum Rgb {
+    Grey(f32),
+    Rgb([f32; 3]),
+}
+
+impl Rgb {
+    fn vec(self) -> Vec3 {
+        match self {
+            Rgb::Grey(g) => Vec3::splat(g),
+            Rgb::Rgb(c) => c.into(),
+        }
+    }
 }
 
 #[derive(Deserialize)]
@@ -360,6 +633,24 @@ struct RawMesh {
     obj: Option<PathBuf>,
     sphereflake: Option<RawFlake>,
     sphere: Option<RawSphere>,
+    #[serde(rename = "box")]
+    cuboid: Option<RawBox>,
+    quad: Option<RawQuad>,
+    material: Option<String>,
+    smooth: Option<bool>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawBox {
+    min: [f32; 3],
+    max: [f32; 3],
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawQuad {
+    size: [f32; 2],
 }
 
 #[derive(Deserialize)]
@@ -409,6 +700,7 @@ struct RawInstance {
     rotate: Option<[f32; 3]>,
     scale: Option<Scale>,
     matrix: Option<Vec<[f32; 4]>>,
+    material: Option<String>,
 }
 
 #[derive(Deserialize)]
@@ -423,6 +715,7 @@ struct RawGrid {
     scale: Option<Range>,
     #[serde(default)]
     seed: u64,
+    material: Option<String>,
 }
 
 #[cfg(test)]

@@ -1,0 +1,455 @@
+//! The seeds' recursive ray tracer (Whitted 1980, the lecture's SHADE) on strahl's streams.
+//!
+//! A [`Renderer`] is generic over the [`Query`] backend: strahl's scenes, or any other engine
+//! that answers closest-hit and any-hit queries with the same ids (the comparison harness plugs
+//! in Embree). It runs as a *wavefront*: camera rays of a batch of pixels, in 4×4 tiles, are traced
+//! as one coherent stream; every hit is shaded ([`shade::shade`]) into a stream of shadow feelers
+//! (any-hit) and a stream of reflected and refracted rays (closest hit), each ray carrying its
+//! pixel and path weight ([`shade::Path`]); bounce by bounce until no path is left. The same
+//! optics run depth-first, one ray at a time, in [`Renderer::render_recursive`] (the reference the
+//! tests hold the wavefront to) and [`Renderer::ray_tree`] (the lecture's ray tree of one pixel).
+//!
+//! Images do not depend on the number of threads: every pixel's samples are seeded by the pixel,
+//! and the contributions of a bounce are summed in ray order.
+
+pub mod camera;
+pub mod image;
+pub mod light;
+pub mod material;
+pub mod shade;
+pub mod surface;
+
+use std::time::Instant;
+
+use glam::Vec3;
+use rayon::prelude::*;
+
+pub use camera::{Projection, RenderCamera};
+pub use image::Image;
+pub use light::{Light, LightKind};
+pub use material::{FresnelMode, Material, Texture};
+pub use shade::{Emission, Path, RayKind, ShadeCounts};
+pub use surface::Surfaces;
+
+use crate::camera::tile_order;
+use crate::error::{Error, Result};
+use crate::ray::{HitStream, Ray, RayStream};
+use crate::raygen::Pcg32;
+use crate::scene::{Coherence, Query};
+
+/// Largest image side, in pixels.
+pub const MAX_IMAGE_SIDE: u32 = 1 << 15;
+/// Most samples per pixel.
+pub const MAX_SPP: u32 = 1 << 12;
+/// Deepest recursion.
+pub const MAX_DEPTH: u32 = 64;
+
+/// Image size, sampling and recursion limits.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Settings {
+    pub width: u32,
+    pub height: u32,
+    /// Samples per pixel: 1 traces the pixel centre; more are stratified and jittered.
+    pub spp: u32,
+    /// Primary rays have depth 0; reflected and refracted rays are spawned up to this depth
+    /// (POV-Ray's `max_trace_level`, 5 by default there too).
+    pub max_depth: u32,
+    /// A child ray whose path weight's largest channel falls below this is not spawned (the
+    /// lecture's "Beitrag zu klein"; POV-Ray's `adc_bailout`, 1/255 by default there too).
+    pub bailout: f32,
+    /// Seed of the per-pixel jitter.
+    pub seed: u64,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Self { width: 640, height: 480, spp: 1, max_depth: 5, bailout: 1.0 / 255.0, seed: 0 }
+    }
+}
+
+impl Settings {
+    /// Typed errors for sizes and counts out of range.
+    pub fn check(&self) -> Result<()> {
+        let bad = |m: String| Err(Error::RenderSettings(m));
+        if !(1..=MAX_IMAGE_SIDE).contains(&self.width) || !(1..=MAX_IMAGE_SIDE).contains(&self.height) {
+            return bad(format!("image size {}×{}: each side must be 1 to {MAX_IMAGE_SIDE}", self.width, self.height));
+        }
+        if !(1..=MAX_SPP).contains(&self.spp) {
+            return bad(format!("{} samples per pixel: must be 1 to {MAX_SPP}", self.spp));
+        }
+        if self.max_depth > MAX_DEPTH {
+            return bad(format!("maximum depth {}: at most {MAX_DEPTH}", self.max_depth));
+        }
+        if !(0.0..=1.0).contains(&self.bailout) {
+            return bad(format!("bailout {}: must lie in [0, 1]", self.bailout));
+        }
+        Ok(())
+    }
+}
+
+/// Everything shading needs: surfaces (normals, materials), materials, lights and the
+/// environment.
+#[derive(Clone, Debug)]
+pub struct World {
+    pub surfaces: Surfaces,
+    pub materials: Vec<Material>,
+    pub lights: Vec<Light>,
+    /// Ambient light, times each material's `ambient · diffuse`.
+    pub ambient: Vec3,
+    /// Colour of rays that leave the scene.
+    pub background: Vec3,
+}
+
+impl World {
+    /// Typed errors for materials, lights or colours that are out of range, and for surfaces that
+    /// name materials the table does not have.
+    pub fn check(&self) -> Result<()> {
+        let bad = |m: String| Err(Error::RenderSettings(m));
+        if self.materials.is_empty() || self.materials.len() > u32::MAX as usize {
+            return bad(format!("{} materials: need 1 to 2^32 − 1", self.materials.len()));
+        }
+        for (i, m) in self.materials.iter().enumerate() {
+            m.check().or_else(|e| bad(format!("material {i}: {e}")))?;
+        }
+        for (i, l) in self.lights.iter().enumerate() {
+            l.check().or_else(|e| bad(format!("light {i}: {e}")))?;
+        }
+        if let Some(m) = self.surfaces.max_material() {
+            if m as usize >= self.materials.len() {
+                return bad(format!("a surface names material {m}, but there are {}", self.materials.len()));
+            }
+        }
+        for (name, c) in [("ambient", self.ambient), ("background", self.background)] {
+            if !(c.is_finite() && c.min_element() >= 0.0) {
+                return bad(format!("{name} colour {c} must be finite and not negative"));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// What a render did.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RenderStats {
+    /// Rays traced, by [`RayKind`] (primary, shadow, reflected, refracted).
+    pub rays: [u64; 4],
+    pub counts_cut_by_weight: u64,
+    pub counts_cut_by_depth: u64,
+    pub total_internal_reflections: u64,
+    /// Wall time of the whole render, and of the queries alone.
+    pub seconds: f64,
+    pub trace_seconds: f64,
+}
+
+impl RenderStats {
+    /// All rays traced.
+    pub fn total_rays(&self) -> u64 {
+        self.rays.iter().sum()
+    }
+
+    fn add(&mut self, c: &ShadeCounts) {
+        self.counts_cut_by_weight += c.cut_by_weight;
+        self.counts_cut_by_depth += c.cut_by_depth;
+        self.total_internal_reflections += c.tir;
+    }
+}
+
+/// One ray of a pixel's ray tree.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct TreeNode {
+    pub parent: Option<usize>,
+    pub kind: RayKind,
+    pub depth: u32,
+    pub origin: [f32; 3],
+    pub dir: [f32; 3],
+    /// Where the ray stopped, in units of `dir`: its hit (or, for a shadow feeler, its blocker),
+    /// `None` for a miss or an unblocked feeler.
+    pub t: Option<f32>,
+    /// The segment's end for shadow feelers (the light; `None` for directional lights).
+    pub tfar: Option<f32>,
+    /// The path weight the ray carries (for shadow feelers: the light it brings if unblocked).
+    pub weight: [f32; 3],
+}
+
+/// Rays traced per batch of camera samples (bounds the wavefront's memory: about 100 bytes each).
+const BATCH: usize = 1 << 18;
+/// Rays shaded per parallel task.
+const SHADE_CHUNK: usize = 4096;
+
+/// A renderer over query backend `Q`.
+pub struct Renderer<'a, Q: Query> {
+    pub query: &'a Q,
+    pub world: &'a World,
+    pub camera: RenderCamera,
+    pub settings: Settings,
+}
+
+/// Outputs of shading one chunk of a bounce.
+#[derive(Default)]
+struct ChunkOut {
+    radiance: Vec<(u32, Vec3)>,
+    /// (light, ray, pixel, radiance if unblocked)
+    shadows: Vec<(u32, Ray, u32, Vec3)>,
+    children: Vec<(Ray, Path, RayKind)>,
+    counts: ShadeCounts,
+}
+
+impl<Q: Query> Renderer<'_, Q> {
+    /// Sample `s` of pixel `(x, y)`: the centre for one sample per pixel, otherwise a jittered
+    /// point in stratum `s` of a √spp × √spp grid (rounded up), seeded by pixel and sample.
+    pub fn camera_ray(&self, x: u32, y: u32, s: u32) -> Option<Ray> {
+        let (w, h) = (self.settings.width, self.settings.height);
+        let (dx, dy) = if self.settings.spp == 1 {
+            (0.5, 0.5)
+        } else {
+            let n = (self.settings.spp as f32).sqrt().ceil() as u32;
+            let mut rng = Pcg32::new(self.settings.seed ^ ((y as u64) << 32 | x as u64), s as u64);
+            (((s % n) as f32 + rng.next_f32()) / n as f32, (((s / n) % n) as f32 + rng.next_f32()) / n as f32)
+        };
+        self.camera.ray(x as f32 + dx, y as f32 + dy, w, h)
+    }
+
+    fn check(&self) -> Result<()> {
+        self.settings.check()?;
+        self.world.check()
+    }
+
+    /// Renders the image as a wavefront on the current rayon pool. `progress` is called with
+    /// the number of camera samples finished so far (of `width · height · spp`).
+    pub fn render(&self, progress: &(dyn Fn(u64) + Sync)) -> Result<(Image, RenderStats)> {
+        self.check()?;
+        let start = Instant::now();
+        let s = &self.settings;
+        let mut stats = RenderStats::default();
+        let mut acc = vec![Vec3::ZERO; s.width as usize * s.height as usize];
+        let pixels = tile_order(s.width, s.height);
+        let per_batch = (BATCH / s.spp as usize).max(1);
+        let mut rays = RayStream::with_capacity(BATCH);
+        let mut paths: Vec<Path> = Vec::with_capacity(BATCH);
+        let mut hits = HitStream::misses(0);
+        let mut shadow_rays = RayStream::with_capacity(BATCH);
+        let mut shadow_info: Vec<(u32, Vec3)> = Vec::with_capacity(BATCH);
+        let mut occluded = Vec::new();
+        let mut outs: Vec<ChunkOut> = Vec::new();
+        let mut done = 0u64;
+        for batch in pixels.chunks(per_batch) {
+            // Camera rays: sample-major, each sample's pixels in tile order (coherent packets).
+            rays.clear();
+            paths.clear();
+            for sample in 0..s.spp {
+                for &(x, y) in batch {
+                    let pixel = y * s.width + x;
+                    if let Some(r) = self.camera_ray(x, y, sample) {
+                        rays.push(&r);
+                        let path = Path { pixel, depth: 0, weight: Vec3::ONE, media: Default::default() };
+                        paths.push(path);
+                    }
+                }
+            }
+            stats.rays[RayKind::Primary as usize] += rays.len() as u64;
+            let mut bounce = 0;
+            while !rays.is_empty() {
+                let coherence = if bounce == 0 { Coherence::Coherent } else { Coherence::Incoherent };
+                let t0 = Instant::now();
+                self.query.intersect_stream_par(&rays, &mut hits, coherence);
+                stats.trace_seconds += t0.elapsed().as_secs_f64();
+
+                // Shade every hit, chunk by chunk in parallel, into per-chunk outputs.
+                let chunks = rays.len().div_ceil(SHADE_CHUNK);
+                outs.resize_with(chunks.max(outs.len()), ChunkOut::default);
+                outs[..chunks].par_iter_mut().enumerate().for_each(|(c, out)| {
+                    out.radiance.clear();
+                    out.shadows.clear();
+                    out.children.clear();
+                    out.counts = ShadeCounts::default();
+                    for i in c * SHADE_CHUNK..((c + 1) * SHADE_CHUNK).min(rays.len()) {
+                        let ray = rays.get(i);
+                        let hit = hits.get(i);
+                        let path = &paths[i];
+                        shade::shade(self.world, s, &ray, hit.as_ref(), path, &mut out.counts, |e| match e {
+                            Emission::Radiance(c) => out.radiance.push((path.pixel, c)),
+                            Emission::Shadow { ray, radiance, light } => {
+                                out.shadows.push((light, ray, path.pixel, radiance))
+                            }
+                            Emission::Child { ray, path, kind } => out.children.push((ray, path, kind)),
+                        });
+                    }
+                });
+
+                // Gather in ray order: radiance, then shadow feelers light by light (each light's
+                // feelers together, so packets share a direction), then the next bounce.
+                shadow_rays.clear();
+                shadow_info.clear();
+                for out in &outs[..chunks] {
+                    for &(p, c) in &out.radiance {
+                        acc[p as usize] += c;
+                    }
+                    stats.add(&out.counts);
+                }
+                for light in 0..self.world.lights.len() as u32 {
+                    for out in &outs[..chunks] {
+                        for (l, r, p, c) in &out.shadows {
+                            if *l == light {
+                                shadow_rays.push(r);
+                                shadow_info.push((*p, *c));
+                            }
+                        }
+                    }
+                }
+                if !shadow_rays.is_empty() {
+                    let t0 = Instant::now();
+                    self.query.occluded_stream_par(&shadow_rays, &mut occluded, coherence);
+                    stats.trace_seconds += t0.elapsed().as_secs_f64();
+                    stats.rays[RayKind::Shadow as usize] += shadow_rays.len() as u64;
+                    for (&(p, c), &o) in shadow_info.iter().zip(&occluded) {
+                        if !o {
+                            acc[p as usize] += c;
+                        }
+                    }
+                }
+                rays.clear();
+                paths.clear();
+                for out in &outs[..chunks] {
+                    for (r, p, k) in &out.children {
+                        rays.push(r);
+                        paths.push(*p);
+                        stats.rays[*k as usize] += 1;
+                    }
+                }
+                bounce += 1;
+            }
+            done += batch.len() as u64 * s.spp as u64;
+            progress(done);
+        }
+        let scale = 1.0 / s.spp as f32;
+        let mut image = Image::new(s.width, s.height);
+        for (o, a) in image.pixels.iter_mut().zip(&acc) {
+            *o = *a * scale;
+        }
+        stats.seconds = start.elapsed().as_secs_f64();
+        Ok((image, stats))
+    }
+
+    /// Renders depth-first, one ray at a time, pixel by pixel in parallel: the textbook recursion,
+    /// the reference for [`render`](Self::render).
+    pub fn render_recursive(&self) -> Result<(Image, RenderStats)> {
+        self.check()?;
+        let start = Instant::now();
+        let s = &self.settings;
+        let rows: Vec<(Vec<Vec3>, RenderStats)> = (0..s.height)
+            .into_par_iter()
+            .map(|y| {
+                let mut st = RenderStats::default();
+                let row = (0..s.width)
+                    .map(|x| {
+                        let mut sum = Vec3::ZERO;
+                        for sample in 0..s.spp {
+                            if let Some(r) = self.camera_ray(x, y, sample) {
+                                let path = Path { pixel: 0, depth: 0, weight: Vec3::ONE, media: Default::default() };
+                                sum += self.trace_depth_first(&r, &path, RayKind::Primary, None, &mut st, &mut None);
+                            }
+                        }
+                        sum / s.spp as f32
+                    })
+                    .collect();
+                (row, st)
+            })
+            .collect();
+        let mut image = Image::new(s.width, s.height);
+        let mut stats = RenderStats::default();
+        for (y, (row, st)) in rows.into_iter().enumerate() {
+            image.pixels[y * s.width as usize..][..s.width as usize].copy_from_slice(&row);
+            for k in 0..4 {
+                stats.rays[k] += st.rays[k];
+            }
+            stats.counts_cut_by_weight += st.counts_cut_by_weight;
+            stats.counts_cut_by_depth += st.counts_cut_by_depth;
+            stats.total_internal_reflections += st.total_internal_reflections;
+        }
+        stats.seconds = start.elapsed().as_secs_f64();
+        Ok((image, stats))
+    }
+
+    /// The ray tree of pixel `(x, y)`'s first sample: every primary, shadow, reflected and
+    /// refracted ray, parents before children, with the pixel's colour from this sample.
+    pub fn ray_tree(&self, x: u32, y: u32) -> Result<(Vec<TreeNode>, Vec3)> {
+        self.check()?;
+        if x >= self.settings.width || y >= self.settings.height {
+            return Err(Error::RenderSettings(format!(
+                "pixel ({x}, {y}) lies outside the {}×{} image",
+                self.settings.width, self.settings.height
+            )));
+        }
+        let mut nodes = Vec::new();
+        let mut st = RenderStats::default();
+        let colour = match self.camera_ray(x, y, 0) {
+            Some(r) => {
+                let path = Path { pixel: 0, depth: 0, weight: Vec3::ONE, media: Default::default() };
+                self.trace_depth_first(&r, &path, RayKind::Primary, None, &mut st, &mut Some(&mut nodes))
+            }
+            None => Vec3::ZERO,
+        };
+        Ok((nodes, colour))
+    }
+
+    /// The recursion: traces `ray`, shades it, follows its shadow feelers and children.
+    fn trace_depth_first(
+        &self,
+        ray: &Ray,
+        path: &Path,
+        kind: RayKind,
+        parent: Option<usize>,
+        stats: &mut RenderStats,
+        tree: &mut Option<&mut Vec<TreeNode>>,
+    ) -> Vec3 {
+        let hit = self.query.intersect(ray);
+        stats.rays[kind as usize] += 1;
+        let me = tree.as_mut().map(|t| {
+            t.push(TreeNode {
+                parent,
+                kind,
+                depth: path.depth,
+                origin: ray.origin.to_array(),
+                dir: ray.dir.to_array(),
+                t: hit.map(|h| h.t),
+                tfar: None,
+                weight: path.weight.to_array(),
+            });
+            t.len() - 1
+        });
+        let mut emitted = Vec::new();
+        let mut counts = ShadeCounts::default();
+        shade::shade(self.world, &self.settings, ray, hit.as_ref(), path, &mut counts, |e| emitted.push(e));
+        stats.add(&counts);
+        let mut sum = Vec3::ZERO;
+        for e in emitted {
+            match e {
+                Emission::Radiance(c) => sum += c,
+                Emission::Shadow { ray: r, radiance, .. } => {
+                    stats.rays[RayKind::Shadow as usize] += 1;
+                    let blocked = self.query.occluded(&r);
+                    if let Some(t) = tree.as_mut() {
+                        let blocker = if blocked { self.query.intersect(&r).map(|h| h.t) } else { None };
+                        t.push(TreeNode {
+                            parent: me,
+                            kind: RayKind::Shadow,
+                            depth: path.depth,
+                            origin: r.origin.to_array(),
+                            dir: r.dir.to_array(),
+                            t: blocker,
+                            tfar: r.tfar.is_finite().then_some(r.tfar),
+                            weight: radiance.to_array(),
+                        });
+                    }
+                    if !blocked {
+                        sum += radiance;
+                    }
+                }
+                Emission::Child { ray: r, path: p, kind: k } => {
+                    sum += self.trace_depth_first(&r, &p, k, me, stats, tree);
+                }
+            }
+        }
+        sum
+    }
+}

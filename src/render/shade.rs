@@ -1,0 +1,244 @@
+//! The seeds' SHADE procedure for one ray: at a hit, the local Phong model with a shadow feeler to
+//! every light, then a reflected and a refracted ray, `L = L_Phong + r_s·L_s + r_t·L_t`. It does
+//! not trace anything itself: it *emits* what it found (radiance, shadow feelers with the light
+//! they would bring, child rays with their path weights), so that the wavefront renderer can
+//! trace all rays of a bounce as one stream and the ray-tree walker can trace them one by one,
+//! with the same optics.
+
+use glam::Vec3;
+
+use super::material::{FresnelMode, beer_lambert, fresnel_exact, fresnel_schlick, reflect, refract};
+use super::{Settings, World};
+use crate::ray::{Hit, Ray, offset_ray_origin};
+
+/// Most nested media a path keeps track of (glass in water in glass …); deeper ones are ignored.
+pub const MAX_MEDIA: usize = 4;
+
+/// The kind of a ray in the ray tree.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum RayKind {
+    Primary,
+    Shadow,
+    Reflected,
+    Refracted,
+}
+
+/// The media a path is inside, innermost last, as material indices.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Media {
+    ids: [u32; MAX_MEDIA],
+    len: u8,
+}
+
+impl Media {
+    /// The innermost medium.
+    pub fn top(&self) -> Option<u32> {
+        self.len.checked_sub(1).map(|i| self.ids[i as usize])
+    }
+
+    fn push(&mut self, m: u32) {
+        if (self.len as usize) < MAX_MEDIA {
+            self.ids[self.len as usize] = m;
+            self.len += 1;
+        }
+    }
+
+    /// Leaves medium `m`: removes its innermost entry (or nothing, if the path was not inside).
+    fn remove(&mut self, m: u32) {
+        if let Some(i) = self.ids[..self.len as usize].iter().rposition(|&x| x == m) {
+            self.ids.copy_within(i + 1..self.len as usize, i);
+            self.len -= 1;
+        }
+    }
+}
+
+/// What a ray carries through the wavefront: its pixel, how much of the pixel's colour it
+/// contributes, its depth and the media it travels in.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Path {
+    pub pixel: u32,
+    pub depth: u32,
+    pub weight: Vec3,
+    pub media: Media,
+}
+
+/// What shading one ray produced.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Emission {
+    /// Light reaching the pixel directly: ambient, background, already weighted.
+    Radiance(Vec3),
+    /// A shadow feeler towards light `light`: if it is not occluded, `radiance` reaches the pixel.
+    Shadow { ray: Ray, radiance: Vec3, light: u32 },
+    /// A reflected or refracted ray to trace next.
+    Child { ray: Ray, path: Path, kind: RayKind },
+}
+
+/// Counters of one shading call.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ShadeCounts {
+    /// Child rays not spawned because their weight fell below the bailout.
+    pub cut_by_weight: u64,
+    /// Child rays not spawned because the path reached the maximum depth.
+    pub cut_by_depth: u64,
+    /// Total internal reflections.
+    pub tir: u64,
+}
+
+/// Shades `ray` (carrying `path`) given its closest hit; returns nothing to trace further on a
+/// miss. `emit` receives the emissions in a fixed order (radiance, shadows by light, reflected,
+/// refracted), so every renderer that calls this sums the same terms.
+pub fn shade(
+    world: &World,
+    settings: &Settings,
+    ray: &Ray,
+    hit: Option<&Hit>,
+    path: &Path,
+    counts: &mut ShadeCounts,
+    mut emit: impl FnMut(Emission),
+) {
+    let mut weight = path.weight;
+    let medium = path.media.top().map(|m| &world.materials[m as usize]);
+    let dir_len = ray.dir.length();
+    let Some(hit) = hit else {
+        // Light from the background, unless an absorbing medium swallows it on the infinite way.
+        if medium.is_none_or(|m| m.absorption == Vec3::ZERO) {
+            emit(Emission::Radiance(weight * world.background));
+        }
+        return;
+    };
+    if let Some(m) = medium {
+        weight *= beer_lambert(m.absorption, hit.t * dir_len);
+    }
+    let Some(sp) = world.surfaces.resolve(ray, hit) else {
+        return;
+    };
+    let mat = &world.materials[sp.material as usize];
+    let d = ray.dir / dir_len;
+    // The side the ray arrives from: front (against the winding's normal) or back.
+    let front = d.dot(sp.ng) < 0.0;
+    let n_face = if front { sp.ng } else { -sp.ng };
+    let mut ns = if front { sp.ns } else { -sp.ns };
+    if ns.dot(-d) <= 0.0 {
+        ns = n_face;
+    }
+    let kd = mat.diffuse_at(sp.p);
+
+    // Ambient.
+    let ambient = weight * mat.ambient * kd * world.ambient;
+    if ambient != Vec3::ZERO {
+        emit(Emission::Radiance(ambient));
+    }
+
+    // Phong: a shadow feeler to every light that faces the surface.
+    let shadow_origin = offset_ray_origin(sp.p, n_face);
+    let lit = mat.diffuse != Vec3::ZERO || mat.texture.is_some() || mat.specular != Vec3::ZERO;
+    for (li, light) in world.lights.iter().enumerate() {
+        if !lit {
+            break;
+        }
+        let Some(inc) = light.incident(sp.p) else { continue };
+        let cos = ns.dot(inc.dir);
+        if cos <= 0.0 || n_face.dot(inc.dir) <= 0.0 {
+            continue;
+        }
+        let r = reflect(-inc.dir, ns);
+        let spec = if mat.specular == Vec3::ZERO { 0.0 } else { r.dot(-d).max(0.0).powf(mat.shininess) };
+        let radiance = weight * inc.color * (kd * cos + mat.specular * spec);
+        if radiance.max_element() <= 0.0 {
+            continue;
+        }
+        let ray = if inc.dist.is_finite() {
+            // The segment to the light: t in (0, 1) of the unnormalized direction.
+            Ray::segment(shadow_origin, light.position - shadow_origin, 0.0, 1.0)
+        } else {
+            Ray::new(shadow_origin, inc.dir)
+        };
+        emit(Emission::Shadow { ray, radiance, light: li as u32 });
+    }
+
+    // Reflection and refraction.
+    if !(mat.is_reflective() || mat.is_transparent()) {
+        return;
+    }
+    if path.depth >= settings.max_depth {
+        counts.cut_by_depth += mat.is_reflective() as u64 + mat.is_transparent() as u64;
+        return;
+    }
+    let n1 = medium.map_or(1.0, |m| m.ior);
+    let mut inner = path.media;
+    let n2 = if front {
+        inner.push(sp.material);
+        mat.ior
+    } else {
+        inner.remove(sp.material);
+        inner.top().map_or(1.0, |m| world.materials[m as usize].ior)
+    };
+    let cos1 = (-d).dot(ns);
+    let (mut kr, mut kt) = (mat.reflect, Vec3::ZERO);
+    let refracted = if mat.is_transparent() { refract(d, ns, n1, n2) } else { None };
+    if mat.is_transparent() {
+        match refracted {
+            None => {
+                // Total internal reflection: all the transmitted energy goes to the reflected ray.
+                counts.tir += 1;
+                kr += mat.transmit;
+            }
+            Some(_) => {
+                let rho = match mat.fresnel {
+                    FresnelMode::Off => 0.0,
+                    FresnelMode::Exact => fresnel_exact(cos1, n1, n2),
+                    FresnelMode::Schlick => fresnel_schlick(cos1, n1, n2),
+                };
+                kr += mat.transmit * rho;
+                kt = mat.transmit * (1.0 - rho);
+            }
+        }
+    }
+    let child = |k: Vec3, media: Media| Path { pixel: path.pixel, depth: path.depth + 1, weight: weight * k, media };
+    if kr != Vec3::ZERO {
+        let c = child(kr, path.media);
+        if c.weight.max_element() < settings.bailout {
+            counts.cut_by_weight += 1;
+        } else {
+            let mut dir = reflect(d, ns);
+            if dir.dot(n_face) <= 0.0 {
+                dir = reflect(d, n_face);
+            }
+            let ray = Ray::new(offset_ray_origin(sp.p, n_face), dir);
+            emit(Emission::Child { ray, path: c, kind: RayKind::Reflected });
+        }
+    }
+    if let (Some(t), true) = (refracted, kt != Vec3::ZERO) {
+        let c = child(kt, inner);
+        if c.weight.max_element() < settings.bailout {
+            counts.cut_by_weight += 1;
+        } else if t.dot(n_face) < 0.0 {
+            let ray = Ray::new(offset_ray_origin(sp.p, -n_face), t);
+            emit(Emission::Child { ray, path: c, kind: RayKind::Refracted });
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn media_stack_nests() {
+        let mut m = Media::default();
+        assert_eq!(m.top(), None);
+        m.push(1);
+        m.push(2);
+        assert_eq!(m.top(), Some(2));
+        m.remove(1);
+        assert_eq!(m.top(), Some(2));
+        m.remove(2);
+        assert_eq!(m.top(), None);
+        m.remove(5);
+        for i in 0..10 {
+            m.push(i);
+        }
+        assert_eq!(m.top(), Some(3), "deeper media than MAX_MEDIA are ignored");
+    }
+}
