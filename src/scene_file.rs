@@ -100,6 +100,17 @@ impl CameraSpec {
     }
 }
 
+/// How a mesh is shaded.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct MeshShading {
+    /// Material index of the mesh's geometries.
+    pub material: u32,
+    /// Smooth shading by interpolated vertex normals (spheres by default) or flat.
+    pub smooth: bool,
+    /// Materials of single geometries by OBJ object/group name, overriding `material`.
+    pub groups: Vec<(String, u32)>,
+}
+
 /// The `[render]` table: image size, sampling, recursion and environment.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RenderSpec {
@@ -158,8 +169,8 @@ pub struct SceneFile {
     /// Materials: index 0 is the default [`Material`], then the `[material.*]` tables in name
     /// order.
     pub materials: Vec<(String, Material)>,
-    /// Per mesh (in `meshes` order): its material index and whether it is shaded smooth.
-    pub mesh_shading: Vec<(u32, bool)>,
+    /// Per mesh (in `meshes` order): materials and normals.
+    pub mesh_shading: Vec<MeshShading>,
     /// Per instance: the material overriding its mesh's, if any.
     pub instance_materials: Vec<Option<u32>>,
     pub render: RenderSpec,
@@ -257,7 +268,13 @@ impl SceneFile {
             };
             let smooth =
                 m.smooth.unwrap_or(matches!(source, MeshSource::Sphere { .. } | MeshSource::Sphereflake { .. }));
-            mesh_shading.push((material(&m.material, &format!("mesh `{name}`"))?.unwrap_or(0), smooth));
+            let what = format!("mesh `{name}`");
+            let mut groups = Vec::new();
+            for (group, mat) in &m.groups {
+                let i = material(&Some(mat.clone()), &format!("{what}, group `{group}`,"))?.expect("named");
+                groups.push((group.clone(), i));
+            }
+            mesh_shading.push(MeshShading { material: material(&m.material, &what)?.unwrap_or(0), smooth, groups });
             meshes.push((name.clone(), source));
         }
         let index = |mesh: &str, what: &str| {
@@ -441,11 +458,18 @@ impl SceneFile {
     /// The renderer's view of the scene, from the objects [`load_objects`](Self::load_objects)
     /// returned: materials per mesh and instance, normals, lights and environment.
     pub fn world(&self, objects: &[Vec<TriangleMesh>]) -> Result<World> {
-        let objs: Vec<Vec<(&TriangleMesh, u32, bool)>> = objects
-            .iter()
-            .zip(&self.mesh_shading)
-            .map(|(meshes, &(m, smooth))| meshes.iter().map(|g| (g, m, smooth)).collect())
-            .collect();
+        let err = |message: String| Error::SceneFile { path: self.path.clone(), message };
+        let mut objs: Vec<Vec<(&TriangleMesh, u32, bool)>> = Vec::with_capacity(objects.len());
+        for ((meshes, sh), (name, _)) in objects.iter().zip(&self.mesh_shading).zip(&self.meshes) {
+            for (group, _) in &sh.groups {
+                if !meshes.iter().any(|g| &g.name == group) {
+                    let names: Vec<&str> = meshes.iter().map(|g| g.name.as_str()).collect();
+                    return Err(err(format!("mesh `{name}` has no object or group `{group}` (it has {names:?})")));
+                }
+            }
+            let material = |g: &TriangleMesh| sh.groups.iter().find(|(n, _)| *n == g.name).map_or(sh.material, |x| x.1);
+            objs.push(meshes.iter().map(|g| (g, material(g), sh.smooth)).collect());
+        }
         let placed: Vec<_> = self.instances.iter().copied().zip(self.instance_materials.iter().copied()).collect();
         let world = World {
             surfaces: Surfaces::new(&objs, &placed),
@@ -454,7 +478,7 @@ impl SceneFile {
             ambient: self.render.ambient,
             background: self.render.background,
         };
-        world.check().map_err(|e| Error::SceneFile { path: self.path.clone(), message: e.to_string() })?;
+        world.check().map_err(|e| err(e.to_string()))?;
         Ok(world)
     }
 }
@@ -638,6 +662,8 @@ struct RawMesh {
     quad: Option<RawQuad>,
     material: Option<String>,
     smooth: Option<bool>,
+    #[serde(default)]
+    groups: BTreeMap<String, String>,
 }
 
 #[derive(Deserialize)]

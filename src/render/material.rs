@@ -79,7 +79,8 @@ impl Material {
         match self.texture {
             None => self.diffuse,
             Some(Texture::Checker { other, size }) => {
-                let c = (p / size).floor();
+                // Nudged like POV-Ray's checker, so that a floor at y = 0 does not flicker.
+                let c = (p / size + 1e-4).floor();
                 if (c.x as i64 + c.y as i64 + c.z as i64).rem_euclid(2) == 0 { self.diffuse } else { other }
             }
         }
