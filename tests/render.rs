@@ -1,0 +1,276 @@
+//! The renderer end to end: the wavefront against the depth-first recursion, thread-count
+//! independence, physics that must hold in a whole image (energy conservation of Fresnel
+//! splits, Beer–Lambert through a slab), the ray tree of a known scene, and bad input.
+
+use std::path::Path;
+
+use glam::Vec3;
+use strahl::render::{RayKind, Renderer, Settings, World};
+use strahl::{BuildConfig, InstancedScene, SceneFile};
+
+fn load(text: &str) -> (SceneFile, InstancedScene, World) {
+    let file = SceneFile::parse(text, Path::new("/virtual/scene.toml")).unwrap();
+    let objects = file.load_objects().unwrap();
+    let world = file.world(&objects).unwrap();
+    let scene = InstancedScene::build(objects, file.instances.clone(), &BuildConfig::default()).unwrap();
+    (file, scene, world)
+}
+
+fn renderer<'a>(
+    file: &SceneFile,
+    scene: &'a InstancedScene,
+    world: &'a World,
+    settings: Settings,
+) -> Renderer<'a, InstancedScene> {
+    Renderer { query: scene, world, camera: file.camera.unwrap().render_camera().unwrap(), settings }
+}
+
+fn whitted() -> String {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("data");
+    std::fs::read_to_string(dir.join("whitted.toml")).unwrap()
+}
+
+#[test]
+fn wavefront_equals_the_recursion_and_ignores_thread_count() {
+    let (file, scene, world) = load(&whitted());
+    let mut settings = file.render.settings;
+    (settings.width, settings.height, settings.spp) = (96, 72, 2);
+    let r = renderer(&file, &scene, &world, settings);
+    let (wave, ws) = r.render(&|_| {}).unwrap();
+    let (rec, rs) = r.render_recursive().unwrap();
+    // The same rays of every kind, the same cut-offs.
+    assert_eq!(ws.rays, rs.rays);
+    assert_eq!(ws.counts_cut_by_weight, rs.counts_cut_by_weight);
+    assert!(ws.rays[RayKind::Refracted as usize] > 1000 && ws.rays[RayKind::Reflected as usize] > 1000);
+    // The same colours, up to the order of float sums.
+    let worst = wave.pixels.iter().zip(&rec.pixels).map(|(a, b)| (*a - *b).abs().max_element()).fold(0.0, f32::max);
+    assert!(worst < 1e-5, "largest difference {worst}");
+    // One thread or two: bit-identical.
+    let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+    let two = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+    let (a, _) = one.install(|| r.render(&|_| {})).unwrap();
+    let (b, _) = two.install(|| r.render(&|_| {})).unwrap();
+    assert_eq!(a, b);
+    assert_eq!(a, wave);
+}
+
+/// A white furnace: a non-absorbing glass body in a uniformly white world, no lights, no
+/// ambient. Every Fresnel split and total internal reflection conserves energy, so every pixel
+/// must come out white, up to what the depth limit drops.
+fn furnace(mesh: &str, depth: u32) -> (f32, f32) {
+    let text = format!(
+        r#"
+[camera]
+eye = [0.0, 0.0, -5.0]
+look_at = [0.0, 0.0, 0.0]
+fov = 40.0
+[render]
+background = 1.0
+ambient = 0.0
+[material.glass]
+color = 0.0
+transmit = 1.0
+ior = 1.5
+[mesh.body]
+{mesh}
+material = "glass"
+[[instance]]
+mesh = "body"
+"#
+    );
+    let (file, scene, world) = load(&text);
+    let settings = Settings { width: 48, height: 48, max_depth: depth, bailout: 0.0, ..Settings::default() };
+    let (img, stats) = renderer(&file, &scene, &world, settings).render(&|_| {}).unwrap();
+    assert!(stats.rays[RayKind::Refracted as usize] > 500);
+    let lo = img.pixels.iter().map(|p| p.min_element()).fold(f32::INFINITY, f32::min);
+    let hi = img.pixels.iter().map(|p| p.max_element()).fold(0.0, f32::max);
+    (lo, hi)
+}
+
+#[test]
+fn fresnel_splits_conserve_energy() {
+    // A slab seen head-on: exact up to the rays beyond depth 12.
+    let (lo, hi) = furnace("box = { min = [-1.0, -1.0, -0.5], max = [1.0, 1.0, 0.5] }", 12);
+    assert!(lo > 0.999 && hi < 1.0 + 1e-5, "slab: {lo}..{hi}");
+    // A smooth-shaded sphere: shading normals bend rays, total internal reflection happens.
+    let (lo, hi) = furnace("sphere = { radius = 1.0, stacks = 32, slices = 64 }", 16);
+    assert!(lo > 0.99 && hi < 1.0 + 1e-5, "sphere: {lo}..{hi}");
+    // Cutting depth loses energy: the furnace shows it.
+    let (lo, _) = furnace("sphere = { radius = 1.0, stacks = 32, slices = 64 }", 1);
+    assert!(lo < 0.95, "depth 1 keeps {lo}");
+}
+
+#[test]
+fn beer_lambert_through_a_slab_of_known_thickness() {
+    // Index 1 (no bending, no Fresnel reflection), absorption per channel, 2 units thick: the
+    // white background seen through it is e^(−2α).
+    let text = r#"
+[camera]
+eye = [0.0, 0.0, -5.0]
+look_at = [0.0, 0.0, 0.0]
+fov = 20.0
+[render]
+background = 1.0
+ambient = 0.0
+[material.tinted]
+color = 0.0
+transmit = 1.0
+ior = 1.0
+absorption = [0.0, 0.25, 1.0]
+[mesh.slab]
+box = { min = [-5.0, -5.0, -1.0], max = [5.0, 5.0, 1.0] }
+material = "tinted"
+[[instance]]
+mesh = "slab"
+"#;
+    let (file, scene, world) = load(text);
+    let settings = Settings { width: 8, height: 8, ..Settings::default() };
+    let (img, _) = renderer(&file, &scene, &world, settings).render(&|_| {}).unwrap();
+    let centre = img.get(4, 4);
+    // The centre pixel's ray is almost perpendicular: path length 2 within 1e-3.
+    let want = Vec3::new(1.0, (-0.5f32).exp(), (-2.0f32).exp());
+    assert!((centre - want).abs().max_element() < 2e-3, "{centre} vs {want}");
+}
+
+#[test]
+fn ray_tree_of_a_hall_of_mirrors() {
+    // Two facing half-mirrors; the camera looks straight at one between them. The tree is a chain:
+    // a primary ray, then one reflected ray per bounce, and a shadow feeler at every hit.
+    let text = r#"
+[camera]
+eye = [0.0, 0.0, 0.0]
+look_at = [0.0, 0.0, 1.0]
+fov = 10.0
+[[light]]
+position = [0.0, 0.5, 0.0]
+[material.mirror]
+color = 0.5
+reflect = 0.5
+[mesh.wall]
+quad = { size = [10.0, 10.0] }
+material = "mirror"
+[[instance]]
+mesh = "wall"
+rotate = [-90.0, 0.0, 0.0]
+translate = [0.0, 0.0, 2.0]
+[[instance]]
+mesh = "wall"
+rotate = [90.0, 0.0, 0.0]
+translate = [0.0, 0.0, -2.0]
+"#;
+    let (file, scene, world) = load(text);
+    let settings = Settings { width: 3, height: 3, max_depth: 3, bailout: 0.0, ..Settings::default() };
+    let r = renderer(&file, &scene, &world, settings);
+    let (nodes, colour) = r.ray_tree(1, 1).unwrap();
+    let count = |k: RayKind| nodes.iter().filter(|n| n.kind == k).count();
+    assert_eq!((count(RayKind::Primary), count(RayKind::Reflected), count(RayKind::Shadow)), (1, 3, 4));
+    assert_eq!(nodes.iter().map(|n| n.depth).max(), Some(3));
+    // Weights halve at each bounce; every hit is 2 units away in a unit direction, or 4 after.
+    let reflected: Vec<_> = nodes.iter().filter(|n| n.kind == RayKind::Reflected).collect();
+    assert_eq!(reflected.iter().map(|n| n.weight[0]).collect::<Vec<_>>(), [0.5, 0.25, 0.125]);
+    assert!(reflected.iter().all(|n| (n.t.unwrap() - 4.0).abs() < 1e-3));
+    assert!(nodes.iter().filter(|n| n.kind == RayKind::Shadow).all(|n| n.t.is_none() && n.tfar == Some(1.0)));
+    // Parents come first.
+    assert!(nodes.iter().enumerate().all(|(i, n)| n.parent.is_none_or(|p| p < i)));
+    assert!(colour.x > 0.0);
+    // A bailout of 0.2 stops the chain after the second reflection (weight 0.125 < 0.2).
+    let r = Renderer { settings: Settings { bailout: 0.2, ..settings }, ..r };
+    let (nodes, _) = r.ray_tree(1, 1).unwrap();
+    assert_eq!(nodes.iter().filter(|n| n.kind == RayKind::Reflected).count(), 2);
+    let (_, stats) = r.render(&|_| {}).unwrap();
+    assert_eq!(stats.counts_cut_by_weight, 9);
+    assert!(r.ray_tree(3, 0).is_err());
+}
+
+#[test]
+fn bad_settings_and_materials_are_typed_errors() {
+    let (file, scene, world) = load(&whitted());
+    for (settings, needle) in [
+        (Settings { width: 0, ..Settings::default() }, "image size"),
+        (Settings { height: 1 << 20, ..Settings::default() }, "image size"),
+        (Settings { spp: 0, ..Settings::default() }, "samples"),
+        (Settings { spp: 1 << 20, ..Settings::default() }, "samples"),
+        (Settings { max_depth: 1000, ..Settings::default() }, "depth"),
+        (Settings { bailout: f32::NAN, ..Settings::default() }, "bailout"),
+    ] {
+        let e = renderer(&file, &scene, &world, settings).render(&|_| {}).unwrap_err();
+        assert!(e.to_string().contains(needle), "{e}");
+    }
+    let base = whitted();
+    for (from, to, needle) in [
+        ("ior = 1.5", "ior = 0.0", "`ior` 0"),
+        ("ior = 1.5", "ior = -1.0", "`ior` -1"),
+        ("color = 0.05", "color = nan", "material `mirror`: `diffuse`"),
+        ("color = 0.05", "color = -1.0", "material `mirror`: `diffuse`"),
+        ("material = \"glass\"", "material = \"crystal\"", "material `crystal`"),
+        ("color = 0.9\n", "color = 0.9\nkind = \"laser\"\n", "kind `laser`"),
+        ("max_depth = 5", "max_depth = 500", "depth 500"),
+        ("width = 640", "width = 0", "image size"),
+        ("fresnel", "fresnel", ""),
+        ("reflect = 0.85", "reflect = 0.85\nfresnel = \"fast\"", "fresnel `fast`"),
+        ("fov = 50.0", "fov = 50.0\nprojection = \"fish\"", "projection `fish`"),
+        ("size = 1.0 }", "size = 0.0 }", "checker"),
+    ] {
+        if needle.is_empty() {
+            continue;
+        }
+        let text = base.replacen(from, to, 1);
+        assert_ne!(text, base, "{from}");
+        let e = SceneFile::parse(&text, Path::new("/virtual/w.toml")).unwrap_err();
+        assert!(e.to_string().contains(needle) && e.to_string().contains("w.toml"), "{needle}: {e}");
+    }
+    // A group that the OBJ does not have: named when the world is made.
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("data");
+    let text =
+        "[mesh.box]\nobj = \"cornell_box.obj\"\ngroups = { attic = \"default\" }\n[[instance]]\nmesh = \"box\"\n";
+    let file = SceneFile::parse(text, &dir.join("x.toml")).unwrap();
+    let e = file.world(&file.load_objects().unwrap()).unwrap_err();
+    assert!(e.to_string().contains("group `attic`"), "{e}");
+}
+
+#[test]
+fn the_command_line_renders_and_fails_cleanly() {
+    let exe = env!("CARGO_BIN_EXE_strahl");
+    let dir = std::env::temp_dir().join(format!("strahl-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("data/whitted.toml");
+    let out = dir.join("w.png");
+    let run = |args: &[&str]| std::process::Command::new(exe).args(args).output().unwrap();
+    let ok = run(&[
+        "render",
+        scene.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--width",
+        "64",
+        "--height",
+        "48",
+        "--ray-tree",
+        "20,30",
+    ]);
+    assert!(ok.status.success(), "{}", String::from_utf8_lossy(&ok.stderr));
+    let img = image::open(&out).unwrap();
+    assert_eq!((img.width(), img.height()), (64, 48));
+    let tree: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("w.raytree.json")).unwrap()).unwrap();
+    assert!(tree["rays"].as_array().unwrap().len() >= 2);
+    // Bad input: an error message, a failing exit code, no image.
+    let bad = dir.join("bad.png");
+    for args in [
+        vec!["render", "/nonexistent/scene.toml", "-o", bad.to_str().unwrap()],
+        vec!["render", scene.to_str().unwrap(), "-o", bad.to_str().unwrap(), "--spp", "0"],
+        vec!["render", scene.to_str().unwrap(), "-o", bad.to_str().unwrap(), "--threads", "0"],
+        vec!["render", scene.to_str().unwrap(), "-o", bad.to_str().unwrap(), "--ray-tree", "9999,1"],
+    ] {
+        let r = run(&args);
+        assert!(!r.status.success() && !r.stderr.is_empty(), "{args:?}");
+        assert!(!String::from_utf8_lossy(&r.stderr).contains("panicked"), "{args:?}");
+    }
+    let missing_dir = dir.join("no/such/dir/x.png");
+    let r =
+        run(&["render", scene.to_str().unwrap(), "-o", missing_dir.to_str().unwrap(), "--width", "8", "--height", "8"]);
+    assert!(!r.status.success());
+    let left: Vec<_> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert_eq!(left.len(), 2, "{left:?}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
