@@ -972,7 +972,12 @@ fn embree_range(o: [f32; 3], d: [f32; 3]) -> bool {
 /// itself (its slab terms saturate), so the two engines may differ there.
 #[inline]
 pub fn embree_ray(rays: &RayStream, i: usize) -> RTCRay {
-    let r = rays.get(i);
+    embree_ray_of(&rays.get(i), i as u32)
+}
+
+/// [`embree_ray`] of one ray, with id `id`.
+#[inline]
+pub fn embree_ray_of(r: &strahl::Ray, id: u32) -> RTCRay {
     let (o, d, tnear, tfar) = if r.is_valid() && embree_range(r.origin.to_array(), r.dir.to_array()) {
         (r.origin, r.dir, r.tnear.max(0.0), r.tfar)
     } else {
@@ -989,7 +994,7 @@ pub fn embree_ray(rays: &RayStream, i: usize) -> RTCRay {
         time: 0.0,
         tfar,
         mask: u32::MAX,
-        id: i as u32,
+        id,
         flags: 0,
     }
 }

@@ -250,7 +250,7 @@ pub fn empty_packet() -> RTCRayHit16 {
     }
 }
 
-fn set_lane(p: &mut RTCRayHit16, l: usize, r: &RTCRay) {
+pub(crate) fn set_lane(p: &mut RTCRayHit16, l: usize, r: &RTCRay) {
     let q = &mut p.ray;
     (q.org_x[l], q.org_y[l], q.org_z[l], q.tnear[l]) = (r.org_x, r.org_y, r.org_z, r.tnear);
     (q.dir_x[l], q.dir_y[l], q.dir_z[l], q.tfar[l], q.id[l]) = (r.dir_x, r.dir_y, r.dir_z, r.tfar, r.id);

@@ -17,7 +17,9 @@ pub mod fuzz;
 pub mod harness;
 pub mod kernel;
 pub mod methods;
+pub mod povray;
 pub mod rayfile;
+pub mod render;
 pub mod report;
 pub mod scenes;
 

@@ -65,6 +65,11 @@ struct Args {
     /// 512×512 primary rays and 3 passes; adds `scaling` to the JSON and scaling.png.
     #[arg(long)]
     scaling: bool,
+    /// Render scene files (the positional arguments, default data/{whitted,cornell,beer}.toml) with
+    /// strahl, with strahl on Embree and with POV-Ray; write render.md, render.json and the
+    /// images to --out, then exit.
+    #[arg(long)]
+    render: bool,
     /// Exit with an error if any scene and class has hit/miss agreement below this fraction.
     #[arg(long)]
     min_agreement: Option<f64>,
@@ -130,6 +135,9 @@ fn main() -> anyhow::Result<()> {
         bail!("--occlusion applies to --trace-rays only");
     }
     let pool = compare::pool(args.threads)?;
+    if args.render {
+        return render_comparison(&args, &pool);
+    }
     let device = embree::Device::new(&format!("threads={}", args.threads))?;
     if let Some(rays) = &args.trace_rays {
         return trace_file(&args, rays, &pool, &device);
@@ -363,5 +371,30 @@ fn write_sphereflake(p: &Path) -> anyhow::Result<()> {
     }
     f.flush()?;
     eprintln!("wrote {} ({} triangles)", p.display(), m.triangle_count());
+    Ok(())
+}
+
+fn render_comparison(args: &Args, pool: &rayon::ThreadPool) -> anyhow::Result<()> {
+    let scenes: Vec<PathBuf> = if args.scenes.is_empty() {
+        ["whitted", "cornell", "beer"].iter().map(|n| project_dir("data").join(format!("{n}.toml"))).collect()
+    } else {
+        args.scenes.clone()
+    };
+    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    if !compare::povray::available() {
+        eprintln!("povray is not installed: rendering with strahl and Embree only");
+    }
+    let mut rows = Vec::new();
+    for s in &scenes {
+        eprintln!("rendering {}", s.display());
+        rows.push(compare::render::compare_scene(s, &args.out, args.passes, args.threads, pool)?);
+    }
+    let md = compare::render::table(&rows, args.threads, args.passes);
+    print!("{md}");
+    std::fs::write(args.out.join("render.md"), &md)?;
+    std::fs::write(args.out.join("render.json"), serde_json::to_string_pretty(&rows)?)?;
+    if let Some(j) = &args.json {
+        std::fs::write(j, serde_json::to_string_pretty(&rows)?)?;
+    }
     Ok(())
 }

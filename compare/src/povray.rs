@@ -1,0 +1,212 @@
+//! POV-Ray 3.7 side by side: a strahl scene file exported to POV-Ray's scene description language,
+//! rendered by Debian's `povray` at the same size, depth and bailout, timed as a whole process.
+//!
+//! The mapping (strahl → POV-Ray):
+//! - coordinates as they are; strahl is right-handed, POV-Ray left-handed, so the camera's
+//!   `right` vector is negated (POV-Ray's documented way to render right-handed scenes);
+//! - pinhole `fov` → `angle` (both horizontal); fisheye → `fisheye angle`; omnimax → `omnimax`;
+//!   panorama (equirectangular) → `spherical angle 360 180`; orthographic → `orthographic` with
+//!   `right`/`up` spanning the window;
+//! - meshes → `mesh2` (with `normal_vectors` where strahl shades smooth), one object per instance
+//!   and geometry with its `matrix` and texture;
+//! - material: `pigment rgb diffuse`, `finish { ambient a·1 diffuse 1 phong ks phong_size n
+//!   reflection r }`; transparent: `pigment rgbf <transmit, 1>` with `interior { ior }` and, with
+//!   Fresnel on, `reflection { 0, 1 fresnel on } conserve_energy`; absorption α →
+//!   `fade_power 1001` (exponential), `fade_distance 1/k`, `fade_color 1 − α/k`, k = max α
+//!   (POV-Ray multiplies by `exp(−(1 − fade_color)·d / fade_distance)`);
+//! - checker → `pigment { checker rgb a, rgb b scale s }`;
+//! - lights: `light_source` (point), `spotlight radius falloff point_at`, `parallel point_at`;
+//!   `fade` → `fade_distance f fade_power 2` (the same `2 / (1 + (d/f)²)`);
+//! - `global_settings { assumed_gamma 1 max_trace_level depth+1 adc_bailout ambient_light }`,
+//!   `background`; one sample per pixel (`-A`), else adaptive anti-aliasing off and `+AM1 +R`.
+//!
+//! What differs by design: POV-Ray lets light through transparent objects to the surfaces behind
+//! them (filtered shadows); strahl's shadow feelers, as Whitted's, stop at any surface. POV-Ray's
+//! `max_trace_level` counts the primary ray as level 1, so strahl's depth d is POV-Ray's d + 1.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Instant;
+
+use glam::Vec3;
+use strahl::SceneFile;
+use strahl::TriangleMesh;
+use strahl::render::{FresnelMode, LightKind, Material, Projection, Settings, Texture, surface::vertex_normals};
+
+fn v(p: Vec3) -> String {
+    format!("<{}, {}, {}>", p.x, p.y, p.z)
+}
+
+fn material_sdl(m: &Material) -> String {
+    let mut s = String::from("texture { pigment { ");
+    if m.is_transparent() {
+        write!(s, "rgbf <{}, {}, {}, 1>", m.transmit.x, m.transmit.y, m.transmit.z).unwrap();
+    } else if let Some(Texture::Checker { other, size }) = m.texture {
+        write!(s, "checker rgb {}, rgb {} scale {size}", v(m.diffuse), v(other)).unwrap();
+    } else {
+        write!(s, "rgb {}", v(m.diffuse)).unwrap();
+    }
+    s.push_str(" } finish { ");
+    write!(s, "ambient rgb {} diffuse 1 ", v(m.ambient)).unwrap();
+    let ks = m.specular.element_sum() / 3.0;
+    if ks > 0.0 {
+        write!(s, "phong {ks} phong_size {} ", m.shininess).unwrap();
+    }
+    if m.is_transparent() && m.fresnel != FresnelMode::Off {
+        write!(s, "reflection {{ {}, 1 fresnel on }} conserve_energy ", v(m.reflect)).unwrap();
+    } else if m.reflect != Vec3::ZERO {
+        write!(s, "reflection {{ {} }} ", v(m.reflect)).unwrap();
+    }
+    s.push_str("} }");
+    if m.is_transparent() {
+        write!(s, " interior {{ ior {}", m.ior).unwrap();
+        let k = m.absorption.max_element();
+        if k > 0.0 {
+            write!(s, " fade_power 1001 fade_distance {} fade_color {}", 1.0 / k, v(Vec3::ONE - m.absorption / k))
+                .unwrap();
+        }
+        s.push_str(" }");
+    }
+    s
+}
+
+fn mesh_sdl(name: &str, m: &TriangleMesh, smooth: bool) -> String {
+    let mut s = format!("#declare {name} = mesh2 {{\n  vertex_vectors {{ {}", m.positions().len());
+    for p in m.positions() {
+        write!(s, ", {}", v(*p)).unwrap();
+    }
+    s.push_str(" }\n");
+    if smooth {
+        let n = vertex_normals(m);
+        write!(s, "  normal_vectors {{ {}", n.len()).unwrap();
+        for p in &n {
+            // POV-Ray rejects zero normals; a vertex of only degenerate triangles gets any.
+            write!(s, ", {}", v(if *p == Vec3::ZERO { Vec3::Y } else { *p })).unwrap();
+        }
+        s.push_str(" }\n");
+    }
+    // Degenerate triangles are left out (POV-Ray warns about each; neither engine hits them).
+    let tris: Vec<usize> = (0..m.triangle_count()).filter(|&i| m.is_hittable(i)).collect();
+    write!(s, "  face_indices {{ {}", tris.len()).unwrap();
+    for &i in &tris {
+        let [a, b, c] = m.indices()[i];
+        write!(s, ", <{a}, {b}, {c}>").unwrap();
+    }
+    s.push_str(" }\n}\n");
+    s
+}
+
+/// The scene as POV-Ray SDL, rendered at `settings`.
+pub fn export(file: &SceneFile, objects: &[Vec<TriangleMesh>], settings: &Settings) -> anyhow::Result<String> {
+    let cam = file.camera.ok_or_else(|| anyhow::anyhow!("{}: no camera", file.path.display()))?;
+    let rc = cam.render_camera().ok_or_else(|| anyhow::anyhow!("bad camera"))?;
+    let aspect = settings.width as f32 / settings.height as f32;
+    let mut s = String::from("#version 3.7;\n");
+    writeln!(
+        s,
+        "global_settings {{ assumed_gamma 1.0 max_trace_level {} adc_bailout {} ambient_light rgb {} }}",
+        settings.max_depth + 1,
+        settings.bailout,
+        v(file.render.ambient)
+    )?;
+    writeln!(s, "background {{ rgb {} }}", v(file.render.background))?;
+    let (kind, right, up) = match rc.projection {
+        Projection::Pinhole { fov_deg } => (format!("perspective angle {fov_deg}"), aspect, 1.0),
+        Projection::Orthographic { width } => ("orthographic".into(), width, width / aspect),
+        Projection::Fisheye { fov_deg } => (format!("fisheye angle {fov_deg}"), aspect, 1.0),
+        Projection::Omnimax => ("omnimax".into(), aspect, 1.0),
+        Projection::Panorama => ("spherical angle 360 180".into(), aspect, 1.0),
+    };
+    writeln!(
+        s,
+        "camera {{ {kind} location {} right {} up {} sky {} look_at {} }}",
+        v(cam.eye),
+        v(Vec3::new(-right, 0.0, 0.0)),
+        v(Vec3::new(0.0, up, 0.0)),
+        v(cam.up),
+        v(cam.look_at)
+    )?;
+    for l in &file.lights {
+        let fade = l.fade.map_or(String::new(), |f| format!(" fade_distance {f} fade_power 2"));
+        let body = match l.kind {
+            LightKind::Point => format!("{} color rgb {}{fade}", v(l.position), v(l.color)),
+            LightKind::Directional { direction } => {
+                // A parallel light from far up-stream, pointing along the direction.
+                let from = -direction * 1e5;
+                format!("{} color rgb {} parallel point_at {}", v(from), v(l.color), v(from + direction))
+            }
+            LightKind::Spot { direction, cos_inner, cos_outer } => format!(
+                "{} color rgb {} spotlight radius {} falloff {} tightness 0 point_at {}{fade}",
+                v(l.position),
+                v(l.color),
+                cos_inner.acos().to_degrees(),
+                cos_outer.acos().to_degrees(),
+                v(l.position + direction)
+            ),
+        };
+        writeln!(s, "light_source {{ {body} }}")?;
+    }
+    for (o, meshes) in objects.iter().enumerate() {
+        for (g, m) in meshes.iter().enumerate() {
+            if m.triangle_count() > 0 {
+                s.push_str(&mesh_sdl(&format!("M{o}_{g}"), m, file.mesh_shading[o].smooth));
+            }
+        }
+    }
+    for (i, inst) in file.instances.iter().enumerate() {
+        let sh = &file.mesh_shading[inst.object];
+        let m = inst.transform;
+        let (a, b, c, t) = (m.matrix3.x_axis, m.matrix3.y_axis, m.matrix3.z_axis, m.translation);
+        let matrix = format!(
+            "matrix <{}, {}, {}, {}, {}, {}, {}, {}, {}, {}, {}, {}>",
+            a.x, a.y, a.z, b.x, b.y, b.z, c.x, c.y, c.z, t.x, t.y, t.z
+        );
+        for (g, mesh) in objects[inst.object].iter().enumerate() {
+            if mesh.triangle_count() == 0 {
+                continue;
+            }
+            let mat = file.instance_materials[i]
+                .or_else(|| sh.groups.iter().find(|(n, _)| *n == mesh.name).map(|x| x.1))
+                .unwrap_or(sh.material);
+            let material = &file.materials[mat as usize].1;
+            writeln!(s, "object {{ M{}_{g} {} {matrix} }}", inst.object, material_sdl(material))?;
+        }
+    }
+    Ok(s)
+}
+
+/// Renders `pov` with POV-Ray into `out` (PNG, sRGB), `threads` render threads, and returns the
+/// process's wall time in seconds.
+pub fn render(pov: &Path, out: &Path, settings: &Settings, threads: usize) -> anyhow::Result<f64> {
+    let mut cmd = Command::new("povray");
+    cmd.arg(format!("+I{}", pov.display()))
+        .arg(format!("+O{}", out.display()))
+        .arg(format!("+W{}", settings.width))
+        .arg(format!("+H{}", settings.height))
+        .arg(format!("+WT{threads}"))
+        .args(["+FN", "-D", "-P", "-V", "-GA", "File_Gamma=sRGB", "+Q9"]);
+    if settings.spp > 1 {
+        let n = (settings.spp as f32).sqrt().round().max(2.0) as u32;
+        cmd.args(["+A0.0", "+AM1"]).arg(format!("+R{}", n - 1));
+    } else {
+        cmd.arg("-A");
+    }
+    let start = Instant::now();
+    let output = cmd.output().map_err(|e| anyhow::anyhow!("cannot run povray: {e}"))?;
+    let secs = start.elapsed().as_secs_f64();
+    if !output.status.success() {
+        anyhow::bail!("povray failed on {}: {}", pov.display(), String::from_utf8_lossy(&output.stderr));
+    }
+    Ok(secs)
+}
+
+/// Whether `povray` can be run.
+pub fn available() -> bool {
+    Command::new("povray").arg("--version").output().is_ok()
+}
+
+/// Where the exported scene of `name` goes in `out`.
+pub fn pov_path(out: &Path, name: &str) -> PathBuf {
+    out.join(format!("{name}.pov"))
+}

@@ -1,0 +1,420 @@
+//! Embree 3 as the renderer's query backend: [`strahl::render::Renderer`] over
+//! [`EmbreeBackend`] renders the same frames with Embree's BVH and kernels, for the frame-time
+//! ratio and the pixel agreement of the two images.
+//!
+//! The renderer hands every backend the same SoA [`RayStream`]s, so Embree's stream queries
+//! convert each chunk of 4096 rays into its own records (`RTCRayHit`/`RTCRay`, thread-local
+//! buffers reused across calls) and call `rtcIntersect1M`/`rtcOccluded1M` with the coherent flag
+//! for camera rays and the incoherent one otherwise — its fastest API for these ray classes in
+//! the harness — and write the answers back. The conversion is part of Embree's time here, as
+//! reading the stream is part of strahl's.
+
+use std::cell::RefCell;
+use std::fmt::Write as _;
+use std::path::Path;
+use std::time::Instant;
+
+use glam::{Affine3A, Mat3, Vec3};
+use rayon::prelude::*;
+use strahl::{
+    Coherence, Hit, HitStream, INVALID_ID, Instance, Query, Ray, RayPacket, RayStream, STREAM_CHUNK, TriangleMesh,
+};
+
+use crate::embree::{self, Device, RTC_INVALID_GEOMETRY_ID, RTCRay, RTCRayHit};
+use crate::harness::{embree_ray_of, empty_hit};
+use crate::kernel::{empty_packet, set_lane};
+
+/// A two-level Embree scene answering strahl's [`Query`].
+pub struct EmbreeBackend {
+    scene: embree::Scene,
+    /// Per instance: Embree 3 reports instance hits' normals in object space; strahl's in world
+    /// space by the cofactor matrix `det(M)·M⁻ᵀ` (which flips with a mirroring transform's winding).
+    cofactor: Vec<Mat3>,
+    _device: Device,
+}
+
+thread_local! {
+    static HIT_BUF: RefCell<Vec<RTCRayHit>> = const { RefCell::new(Vec::new()) };
+    static RAY_BUF: RefCell<Vec<RTCRay>> = const { RefCell::new(Vec::new()) };
+}
+
+fn cofactor(m: &Affine3A) -> Mat3 {
+    let l = Mat3::from(m.matrix3);
+    l.inverse().transpose() * l.determinant()
+}
+
+impl EmbreeBackend {
+    /// Builds `objects` placed by `instances` with Embree's default (medium) quality.
+    pub fn build(objects: &[Vec<TriangleMesh>], instances: &[Instance]) -> anyhow::Result<Self> {
+        let device = Device::new("threads=2")?;
+        let xfms: Vec<(usize, [f32; 12])> = instances
+            .iter()
+            .map(|i| {
+                let m = i.transform;
+                let mut c = [0.0f32; 12];
+                for (k, col) in [m.matrix3.x_axis, m.matrix3.y_axis, m.matrix3.z_axis, m.translation].iter().enumerate()
+                {
+                    c[3 * k..3 * k + 3].copy_from_slice(&col.to_array());
+                }
+                (i.object, c)
+            })
+            .collect();
+        let scene = embree::Scene::build_instanced(&device, objects, &xfms, embree::Quality::Medium)?;
+        let cofactor = instances.iter().map(|i| cofactor(&i.transform)).collect();
+        Ok(Self { scene, cofactor, _device: device })
+    }
+
+    fn hit(&self, rh: &RTCRayHit) -> Option<Hit> {
+        let h = &rh.hit;
+        if h.geomID == RTC_INVALID_GEOMETRY_ID {
+            return None;
+        }
+        let inst = h.instID[0];
+        let ng = Vec3::new(h.Ng_x, h.Ng_y, h.Ng_z);
+        let ng = match self.cofactor.get(inst as usize) {
+            Some(c) => *c * ng,
+            None => ng,
+        };
+        let inst_id = if inst == RTC_INVALID_GEOMETRY_ID { INVALID_ID } else { inst };
+        Some(Hit { t: rh.ray.tfar, u: h.u, v: h.v, ng, prim_id: h.primID, geom_id: h.geomID, inst_id })
+    }
+}
+
+impl Query for EmbreeBackend {
+    fn intersect(&self, ray: &Ray) -> Option<Hit> {
+        let mut rh = RTCRayHit { ray: embree_ray_of(ray, 0), hit: empty_hit() };
+        self.scene.intersect1(&mut rh, false);
+        self.hit(&rh)
+    }
+
+    fn occluded(&self, ray: &Ray) -> bool {
+        let mut r = embree_ray_of(ray, 0);
+        self.scene.occluded1(&mut r, false);
+        r.tfar == f32::NEG_INFINITY
+    }
+
+    fn intersect_packet_each(&self, rays: &RayPacket, mut f: impl FnMut(usize, &Hit)) {
+        let mut p = empty_packet();
+        let mut valid = [0i32; 16];
+        for l in 0..16 {
+            if rays.is_active(l) {
+                set_lane(&mut p, l, &embree_ray_of(&rays.get(l), l as u32));
+                valid[l] = -1;
+            }
+        }
+        self.scene.intersect16(&valid, &mut p, false);
+        for l in (0..16).filter(|&l| valid[l] != 0) {
+            let h = &p.hit;
+            let rh = RTCRayHit {
+                ray: RTCRay { tfar: p.ray.tfar[l], ..embree_ray_of(&rays.get(l), l as u32) },
+                hit: embree::RTCHit {
+                    Ng_x: h.Ng_x[l],
+                    Ng_y: h.Ng_y[l],
+                    Ng_z: h.Ng_z[l],
+                    u: h.u[l],
+                    v: h.v[l],
+                    primID: h.primID[l],
+                    geomID: h.geomID[l],
+                    instID: [h.instID[0][l]],
+                },
+            };
+            if let Some(hit) = self.hit(&rh) {
+                f(l, &hit);
+            }
+        }
+    }
+
+    fn occluded_packet(&self, rays: &RayPacket) -> u32 {
+        let mut p = empty_packet();
+        let mut valid = [0i32; 16];
+        for l in 0..16 {
+            if rays.is_active(l) {
+                set_lane(&mut p, l, &embree_ray_of(&rays.get(l), l as u32));
+                valid[l] = -1;
+            }
+        }
+        self.scene.occluded16(&valid, &mut p.ray, false);
+        (0..16).filter(|&l| valid[l] != 0 && p.ray.tfar[l] == f32::NEG_INFINITY).fold(0, |m, l| m | 1 << l)
+    }
+
+    fn intersect_stream_par(&self, rays: &RayStream, hits: &mut HitStream, coherence: Coherence) {
+        let n = rays.len();
+        hits.reset(n);
+        let coherent = coherence == Coherence::Coherent;
+        let c = STREAM_CHUNK;
+        let h = hits;
+        (
+            (h.t.par_chunks_mut(c), h.u.par_chunks_mut(c), h.v.par_chunks_mut(c)),
+            (h.ng_x.par_chunks_mut(c), h.ng_y.par_chunks_mut(c), h.ng_z.par_chunks_mut(c)),
+            (h.prim_id.par_chunks_mut(c), h.geom_id.par_chunks_mut(c), h.inst_id.par_chunks_mut(c)),
+        )
+            .into_par_iter()
+            .enumerate()
+            .with_max_len(1)
+            .for_each(|(i, ((t, u, v), (nx, ny, nz), (prim, geom, inst)))| {
+                HIT_BUF.with_borrow_mut(|buf| {
+                    let start = i * c;
+                    buf.clear();
+                    buf.extend(
+                        (start..start + t.len())
+                            .map(|k| RTCRayHit { ray: embree_ray_of(&rays.get(k), k as u32), hit: empty_hit() }),
+                    );
+                    self.scene.intersect1m(buf, coherent);
+                    for (k, rh) in buf.iter().enumerate() {
+                        if let Some(hit) = self.hit(rh) {
+                            (t[k], u[k], v[k]) = (hit.t, hit.u, hit.v);
+                            (nx[k], ny[k], nz[k]) = (hit.ng.x, hit.ng.y, hit.ng.z);
+                            (prim[k], geom[k], inst[k]) = (hit.prim_id, hit.geom_id, hit.inst_id);
+                        }
+                    }
+                });
+            });
+    }
+
+    fn occluded_stream_par(&self, rays: &RayStream, occluded: &mut Vec<bool>, coherence: Coherence) {
+        occluded.clear();
+        occluded.resize(rays.len(), false);
+        let coherent = coherence == Coherence::Coherent;
+        occluded.par_chunks_mut(STREAM_CHUNK).enumerate().with_max_len(1).for_each(|(i, out)| {
+            RAY_BUF.with_borrow_mut(|buf| {
+                let start = i * STREAM_CHUNK;
+                buf.clear();
+                buf.extend((start..start + out.len()).map(|k| embree_ray_of(&rays.get(k), k as u32)));
+                self.scene.occluded1m(buf, coherent);
+                for (o, r) in out.iter_mut().zip(buf.iter()) {
+                    *o = r.tfar == f32::NEG_INFINITY;
+                }
+            });
+        });
+    }
+}
+
+/// One render scene's figures.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct RenderRow {
+    pub scene: String,
+    pub width: u32,
+    pub height: u32,
+    pub spp: u32,
+    pub max_depth: u32,
+    pub triangles: u64,
+    /// Rays of one frame by kind: primary, shadow, reflected, refracted.
+    pub rays: [u64; 4],
+    /// Median frame times over the interleaved passes, seconds.
+    pub strahl_s: f64,
+    pub embree_s: f64,
+    /// Quartiles of the per-pass ratios strahl time / Embree time (below 1: strahl faster).
+    pub ratio_quartiles: [f64; 3],
+    /// Median time inside the queries, per backend.
+    pub strahl_query_s: f64,
+    pub embree_query_s: f64,
+    /// Pixels whose 8-bit sRGB colours differ by more than 1 in some channel, strahl vs Embree.
+    pub embree_pixels_differing: u64,
+    /// strahl's whole job (read, load, build, render, write PNG), seconds, median of the passes.
+    pub strahl_job_s: f64,
+    /// POV-Ray's whole process, seconds (median of its runs), and its image against strahl's.
+    pub povray_s: Option<f64>,
+    pub povray_psnr_db: Option<f64>,
+    /// Fraction of pixels within 8/255 in every channel of POV-Ray's.
+    pub povray_close: Option<f64>,
+    /// Rays the contribution cut-off saved in one frame, and the largest 8-bit difference it made.
+    pub cut_by_weight: u64,
+    pub bailout_rays_without: u64,
+    pub bailout_max_diff: u8,
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn quartiles(v: &mut [f64]) -> [f64; 3] {
+    v.sort_by(f64::total_cmp);
+    let q = |f: f64| v[((v.len() - 1) as f64 * f).round() as usize];
+    [q(0.25), q(0.5), q(0.75)]
+}
+
+/// Largest per-channel difference of two 8-bit images, and how many pixels differ by more than `tol`.
+fn diff8(a: &[u8], b: &[u8], tol: u8) -> (u8, u64) {
+    let mut worst = 0;
+    let mut count = 0;
+    for (p, q) in a.chunks(3).zip(b.chunks(3)) {
+        let d = p.iter().zip(q).map(|(x, y)| x.abs_diff(*y)).max().unwrap_or(0);
+        worst = worst.max(d);
+        count += (d > tol) as u64;
+    }
+    (worst, count)
+}
+
+fn psnr(a: &[u8], b: &[u8]) -> f64 {
+    let mse = a.iter().zip(b).map(|(x, y)| (*x as f64 - *y as f64).powi(2)).sum::<f64>() / a.len() as f64;
+    if mse == 0.0 { f64::INFINITY } else { 10.0 * (255.0f64 * 255.0 / mse).log10() }
+}
+
+/// Renders one scene file with strahl, with strahl on Embree, and with POV-Ray (when installed),
+/// `passes` interleaved timed frames each after a warm-up; writes the three images to `out`.
+pub fn compare_scene(
+    path: &Path,
+    out: &Path,
+    passes: usize,
+    threads: usize,
+    pool: &rayon::ThreadPool,
+) -> anyhow::Result<RenderRow> {
+    use strahl::render::Renderer;
+    let name = path.file_stem().map_or("scene".into(), |s| s.to_string_lossy().into_owned());
+    let file = strahl::SceneFile::read(path)?;
+    let objects = file.load_objects()?;
+    let world = file.world(&objects)?;
+    let settings = file.render.settings;
+    let camera =
+        file.camera.and_then(|c| c.render_camera()).ok_or_else(|| anyhow::anyhow!("{}: no camera", path.display()))?;
+    let triangles = objects
+        .iter()
+        .zip(0..)
+        .map(|(o, k)| {
+            let n: usize = o.iter().map(|m| m.triangle_count()).sum();
+            n as u64 * file.instances.iter().filter(|i| i.object == k).count() as u64
+        })
+        .sum();
+    let (scene, backend) = pool.install(|| -> anyhow::Result<_> {
+        let scene =
+            strahl::InstancedScene::build(objects.clone(), file.instances.clone(), &strahl::BuildConfig::default())?;
+        Ok((scene, EmbreeBackend::build(&objects, &file.instances)?))
+    })?;
+    let ours = Renderer { query: &scene, world: &world, camera, settings };
+    let theirs = Renderer { query: &backend, world: &world, camera, settings };
+    let none = |_| {};
+    let (mut img_s, mut stats) = pool.install(|| ours.render(&none))?;
+    let (mut img_e, _) = pool.install(|| theirs.render(&none))?;
+    let (mut ts, mut te, mut qs, mut qe, mut ratios) = (vec![], vec![], vec![], vec![], vec![]);
+    for _ in 0..passes {
+        let (i, s) = pool.install(|| ours.render(&none))?;
+        let (j, e) = pool.install(|| theirs.render(&none))?;
+        ts.push(s.seconds);
+        te.push(e.seconds);
+        qs.push(s.trace_seconds);
+        qe.push(e.trace_seconds);
+        ratios.push(s.seconds / e.seconds);
+        (img_s, stats, img_e) = (i, s, j);
+    }
+    img_s.write(&out.join(format!("{name}_strahl.png")))?;
+    img_e.write(&out.join(format!("{name}_embree.png")))?;
+    let (s8, e8) = (img_s.to_srgb8(), img_e.to_srgb8());
+    let (_, embree_pixels_differing) = diff8(&s8, &e8, 1);
+    // The bailout's saving: the same frame with the cut-off at 0.
+    let all = Renderer { settings: strahl::render::Settings { bailout: 0.0, ..settings }, ..ours };
+    let (img_all, stats_all) = pool.install(|| all.render(&none))?;
+    let (bailout_max_diff, _) = diff8(&s8, &img_all.to_srgb8(), 0);
+    // strahl's whole job, as POV-Ray's process does it.
+    let mut jobs = Vec::new();
+    for _ in 0..passes.clamp(1, 3) {
+        let t0 = Instant::now();
+        pool.install(|| -> anyhow::Result<()> {
+            let f = strahl::SceneFile::read(path)?;
+            let objs = f.load_objects()?;
+            let w = f.world(&objs)?;
+            let sc = strahl::InstancedScene::build(objs, f.instances.clone(), &strahl::BuildConfig::default())?;
+            let r = Renderer { query: &sc, world: &w, camera, settings };
+            r.render(&none)?.0.write(&out.join(format!("{name}_strahl.png")))?;
+            Ok(())
+        })?;
+        jobs.push(t0.elapsed().as_secs_f64());
+    }
+    let (mut povray_s, mut povray_psnr_db, mut povray_close) = (None, None, None);
+    if crate::povray::available() {
+        let pov = crate::povray::pov_path(out, &name);
+        std::fs::write(&pov, crate::povray::export(&file, &objects, &settings)?)?;
+        let png = out.join(format!("{name}_povray.png"));
+        let mut times = Vec::new();
+        for _ in 0..passes.clamp(1, 3) {
+            times.push(crate::povray::render(&pov, &png, &settings, threads)?);
+        }
+        let p8 = image::open(&png)?.to_rgb8().into_raw();
+        if p8.len() == s8.len() {
+            povray_psnr_db = Some(psnr(&s8, &p8));
+            let (_, far) = diff8(&s8, &p8, 8);
+            povray_close = Some(1.0 - far as f64 / (s8.len() / 3) as f64);
+        }
+        povray_s = Some(median(&mut times));
+    }
+    Ok(RenderRow {
+        scene: name,
+        width: settings.width,
+        height: settings.height,
+        spp: settings.spp,
+        max_depth: settings.max_depth,
+        triangles,
+        rays: stats.rays,
+        strahl_s: median(&mut ts),
+        embree_s: median(&mut te),
+        ratio_quartiles: quartiles(&mut ratios),
+        strahl_query_s: median(&mut qs),
+        embree_query_s: median(&mut qe),
+        embree_pixels_differing,
+        strahl_job_s: median(&mut jobs),
+        povray_s,
+        povray_psnr_db,
+        povray_close,
+        cut_by_weight: stats.counts_cut_by_weight,
+        bailout_rays_without: stats_all.total_rays(),
+        bailout_max_diff,
+    })
+}
+
+/// The Markdown table of [`compare_scene`] rows.
+pub fn table(rows: &[RenderRow], threads: usize, passes: usize) -> String {
+    let mut s = format!(
+        "Frame times: median of {passes} interleaved passes, {threads} threads; ratio quartiles of the pass pairs. \
+         POV-Ray: whole process (parse, render, write), median of up to 3 runs; strahl job: read, load, build, render, write.\n\n\
+         | scene | size | rays (prim / shadow / refl / refr) | strahl frame | strahl on Embree | ratio (q1 / med / q3) | share in queries (strahl / Embree) | Mrays/s strahl | pixels ≠ Embree | strahl job | POV-Ray | POV-Ray ÷ strahl job | PSNR vs POV-Ray | within 8/255 |\n\
+         |---|---|---|---:|---:|---|---|---:|---:|---:|---:|---:|---:|---:|\n"
+    );
+    for r in rows {
+        let total: u64 = r.rays.iter().sum();
+        let pov = |x: Option<f64>, f: &dyn Fn(f64) -> String| x.map_or("—".into(), f);
+        writeln!(
+            s,
+            "| {} | {}×{}, {} spp, depth {} | {} / {} / {} / {} | {:.1} ms | {:.1} ms | {:.2} / {:.2} / {:.2} | {:.0}% / {:.0}% | {:.1} | {} | {:.0} ms | {} | {} | {} | {} |",
+            r.scene,
+            r.width,
+            r.height,
+            r.spp,
+            r.max_depth,
+            r.rays[0],
+            r.rays[1],
+            r.rays[2],
+            r.rays[3],
+            r.strahl_s * 1e3,
+            r.embree_s * 1e3,
+            r.ratio_quartiles[0],
+            r.ratio_quartiles[1],
+            r.ratio_quartiles[2],
+            100.0 * r.strahl_query_s / r.strahl_s,
+            100.0 * r.embree_query_s / r.embree_s,
+            total as f64 / r.strahl_s / 1e6,
+            r.embree_pixels_differing,
+            r.strahl_job_s * 1e3,
+            pov(r.povray_s, &|x| format!("{:.0} ms", x * 1e3)),
+            pov(r.povray_s, &|x| format!("{:.1}×", x / r.strahl_job_s)),
+            pov(r.povray_psnr_db, &|x| format!("{x:.1} dB")),
+            pov(r.povray_close, &|x| format!("{:.1}%", 100.0 * x)),
+        )
+        .unwrap();
+    }
+    s.push_str("\nContribution cut-off (bailout) per frame: ");
+    for r in rows {
+        let saved = r.bailout_rays_without.saturating_sub(r.rays.iter().sum());
+        write!(
+            s,
+            "{}: {} rays saved of {} ({:.1}%), largest 8-bit change {}; ",
+            r.scene,
+            saved,
+            r.bailout_rays_without,
+            100.0 * saved as f64 / r.bailout_rays_without.max(1) as f64,
+            r.bailout_max_diff
+        )
+        .unwrap();
+    }
+    s.push('\n');
+    s
+}
