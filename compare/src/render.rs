@@ -2,12 +2,11 @@
 //! [`EmbreeBackend`] renders the same frames with Embree's BVH and kernels, for the frame-time
 //! ratio and the pixel agreement of the two images.
 //!
-//! The renderer hands every backend the same SoA [`RayStream`]s, so Embree's stream queries
-//! convert each chunk of 4096 rays into its own records (`RTCRayHit`/`RTCRay`, thread-local
-//! buffers reused across calls) and call `rtcIntersect1M`/`rtcOccluded1M` with the coherent flag
-//! for camera rays and the incoherent one otherwise — its fastest API for these ray classes in
-//! the harness — and write the answers back. The conversion is part of Embree's time here, as
-//! reading the stream is part of strahl's.
+//! The renderer hands every backend the same SoA [`RayStream`]s (one wavefront's, up to 4096 rays),
+//! so Embree's stream queries convert them into its own records (`RTCRayHit`/`RTCRay`, in
+//! thread-local buffers reused across calls) and call `rtcIntersect1M`/`rtcOccluded1M` with the
+//! coherent flag for camera rays and the incoherent one otherwise, and write the answers back.
+//! The conversion is part of Embree's time here, as reading the stream is part of strahl's.
 
 use std::cell::RefCell;
 use std::fmt::Write as _;
@@ -137,6 +136,30 @@ impl Query for EmbreeBackend {
         (0..16).filter(|&l| valid[l] != 0 && p.ray.tfar[l] == f32::NEG_INFINITY).fold(0, |m, l| m | 1 << l)
     }
 
+    fn intersect_stream(&self, rays: &RayStream, hits: &mut HitStream, coherence: Coherence) {
+        let n = rays.len();
+        hits.reset(n);
+        let h = hits;
+        let out = HitOut {
+            t: &mut h.t,
+            u: &mut h.u,
+            v: &mut h.v,
+            nx: &mut h.ng_x,
+            ny: &mut h.ng_y,
+            nz: &mut h.ng_z,
+            prim: &mut h.prim_id,
+            geom: &mut h.geom_id,
+            inst: &mut h.inst_id,
+        };
+        self.intersect_chunk(rays, 0, out, coherence == Coherence::Coherent);
+    }
+
+    fn occluded_stream(&self, rays: &RayStream, occluded: &mut Vec<bool>, coherence: Coherence) {
+        occluded.clear();
+        occluded.resize(rays.len(), false);
+        self.occluded_chunk(rays, 0, occluded, coherence == Coherence::Coherent);
+    }
+
     fn intersect_stream_par(&self, rays: &RayStream, hits: &mut HitStream, coherence: Coherence) {
         let n = rays.len();
         hits.reset(n);
@@ -152,22 +175,8 @@ impl Query for EmbreeBackend {
             .enumerate()
             .with_max_len(1)
             .for_each(|(i, ((t, u, v), (nx, ny, nz), (prim, geom, inst)))| {
-                HIT_BUF.with_borrow_mut(|buf| {
-                    let start = i * c;
-                    buf.clear();
-                    buf.extend(
-                        (start..start + t.len())
-                            .map(|k| RTCRayHit { ray: embree_ray_of(&rays.get(k), k as u32), hit: empty_hit() }),
-                    );
-                    self.scene.intersect1m(buf, coherent);
-                    for (k, rh) in buf.iter().enumerate() {
-                        if let Some(hit) = self.hit(rh) {
-                            (t[k], u[k], v[k]) = (hit.t, hit.u, hit.v);
-                            (nx[k], ny[k], nz[k]) = (hit.ng.x, hit.ng.y, hit.ng.z);
-                            (prim[k], geom[k], inst[k]) = (hit.prim_id, hit.geom_id, hit.inst_id);
-                        }
-                    }
-                });
+                let out = HitOut { t, u, v, nx, ny, nz, prim, geom, inst };
+                self.intersect_chunk(rays, i * c, out, coherent);
             });
     }
 
@@ -175,16 +184,57 @@ impl Query for EmbreeBackend {
         occluded.clear();
         occluded.resize(rays.len(), false);
         let coherent = coherence == Coherence::Coherent;
-        occluded.par_chunks_mut(STREAM_CHUNK).enumerate().with_max_len(1).for_each(|(i, out)| {
-            RAY_BUF.with_borrow_mut(|buf| {
-                let start = i * STREAM_CHUNK;
-                buf.clear();
-                buf.extend((start..start + out.len()).map(|k| embree_ray_of(&rays.get(k), k as u32)));
-                self.scene.occluded1m(buf, coherent);
-                for (o, r) in out.iter_mut().zip(buf.iter()) {
-                    *o = r.tfar == f32::NEG_INFINITY;
+        occluded
+            .par_chunks_mut(STREAM_CHUNK)
+            .enumerate()
+            .with_max_len(1)
+            .for_each(|(i, out)| self.occluded_chunk(rays, i * STREAM_CHUNK, out, coherent));
+    }
+}
+
+/// Where a run of hits goes: slices of a [`HitStream`]'s arrays, all of one length.
+struct HitOut<'a> {
+    t: &'a mut [f32],
+    u: &'a mut [f32],
+    v: &'a mut [f32],
+    nx: &'a mut [f32],
+    ny: &'a mut [f32],
+    nz: &'a mut [f32],
+    prim: &'a mut [u32],
+    geom: &'a mut [u32],
+    inst: &'a mut [u32],
+}
+
+impl EmbreeBackend {
+    /// Rays `start..start + out.t.len()` through `rtcIntersect1M`, in Embree's records built in a
+    /// thread-local buffer; answers written into `out` (misses left as they are).
+    fn intersect_chunk(&self, rays: &RayStream, start: usize, out: HitOut<'_>, coherent: bool) {
+        HIT_BUF.with_borrow_mut(|buf| {
+            buf.clear();
+            let n = out.t.len();
+            buf.extend(
+                (start..start + n).map(|k| RTCRayHit { ray: embree_ray_of(&rays.get(k), k as u32), hit: empty_hit() }),
+            );
+            self.scene.intersect1m(buf, coherent);
+            for (k, rh) in buf.iter().enumerate() {
+                if let Some(hit) = self.hit(rh) {
+                    (out.t[k], out.u[k], out.v[k]) = (hit.t, hit.u, hit.v);
+                    (out.nx[k], out.ny[k], out.nz[k]) = (hit.ng.x, hit.ng.y, hit.ng.z);
+                    (out.prim[k], out.geom[k], out.inst[k]) = (hit.prim_id, hit.geom_id, hit.inst_id);
                 }
-            });
+            }
+        });
+    }
+
+    /// Rays `start..start + out.len()` through `rtcOccluded1M`.
+    fn occluded_chunk(&self, rays: &RayStream, start: usize, out: &mut [bool], coherent: bool) {
+        RAY_BUF.with_borrow_mut(|buf| {
+            buf.clear();
+            buf.extend((start..start + out.len()).map(|k| embree_ray_of(&rays.get(k), k as u32)));
+            self.scene.occluded1m(buf, coherent);
+            for (o, r) in out.iter_mut().zip(buf.iter()) {
+                *o = r.tfar == f32::NEG_INFINITY;
+            }
         });
     }
 }
@@ -205,9 +255,9 @@ pub struct RenderRow {
     pub embree_s: f64,
     /// Quartiles of the per-pass ratios strahl time / Embree time (below 1: strahl faster).
     pub ratio_quartiles: [f64; 3],
-    /// Median time inside the queries, per backend.
-    pub strahl_query_s: f64,
-    pub embree_query_s: f64,
+    /// Median share of the worker threads' time spent inside the queries, per backend.
+    pub strahl_query_share: f64,
+    pub embree_query_share: f64,
     /// Pixels whose 8-bit sRGB colours differ by more than 1 in some channel, strahl vs Embree.
     pub embree_pixels_differing: u64,
     /// strahl's whole job (read, load, build, render, write PNG), seconds, median of the passes.
@@ -292,8 +342,8 @@ pub fn compare_scene(
         let (j, e) = pool.install(|| theirs.render(&none))?;
         ts.push(s.seconds);
         te.push(e.seconds);
-        qs.push(s.trace_seconds);
-        qe.push(e.trace_seconds);
+        qs.push(s.query_share());
+        qe.push(e.query_share());
         ratios.push(s.seconds / e.seconds);
         (img_s, stats, img_e) = (i, s, j);
     }
@@ -348,8 +398,8 @@ pub fn compare_scene(
         strahl_s: median(&mut ts),
         embree_s: median(&mut te),
         ratio_quartiles: quartiles(&mut ratios),
-        strahl_query_s: median(&mut qs),
-        embree_query_s: median(&mut qe),
+        strahl_query_share: median(&mut qs),
+        embree_query_share: median(&mut qe),
         embree_pixels_differing,
         strahl_job_s: median(&mut jobs),
         povray_s,
@@ -389,8 +439,8 @@ pub fn table(rows: &[RenderRow], threads: usize, passes: usize) -> String {
             r.ratio_quartiles[0],
             r.ratio_quartiles[1],
             r.ratio_quartiles[2],
-            100.0 * r.strahl_query_s / r.strahl_s,
-            100.0 * r.embree_query_s / r.embree_s,
+            100.0 * r.strahl_query_share,
+            100.0 * r.embree_query_share,
             total as f64 / r.strahl_s / 1e6,
             r.embree_pixels_differing,
             r.strahl_job_s * 1e3,

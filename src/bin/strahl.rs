@@ -132,7 +132,7 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
     image.write(&args.output)?;
     let k = |kind: RayKind| stats.rays[kind as usize];
     println!(
-        "{}: {}×{}, {} spp, depth {}, {} threads; build {:.2} s, render {:.3} s ({:.3} s in queries); rays: {} primary, {} shadow, {} reflected, {} refracted = {} ({:.1} Mrays/s); cut by weight {}, by depth {}",
+        "{}: {}×{}, {} spp, depth {}, {} threads; build {:.2} s, render {:.3} s ({:.0}% of thread time in queries, {:.0}% shading); rays: {} primary, {} shadow, {} reflected, {} refracted = {} ({:.1} Mrays/s); cut by weight {}, by depth {}",
         args.output.display(),
         settings.width,
         settings.height,
@@ -141,7 +141,8 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
         args.threads,
         build_s,
         stats.seconds,
-        stats.trace_seconds,
+        100.0 * stats.query_share(),
+        100.0 * stats.shade_seconds / (stats.seconds * stats.threads.max(1) as f64),
         k(RayKind::Primary),
         k(RayKind::Shadow),
         k(RayKind::Reflected),

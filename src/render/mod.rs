@@ -2,10 +2,11 @@
 //!
 //! A [`Renderer`] is generic over the [`Query`] backend: strahl's scenes, or any other engine
 //! that answers closest-hit and any-hit queries with the same ids (the comparison harness plugs
-//! in Embree). It runs as a *wavefront*: camera rays of a batch of pixels, in 4×4 tiles, are traced
-//! as one coherent stream; every hit is shaded ([`shade::shade`]) into a stream of shadow feelers
-//! (any-hit) and a stream of reflected and refracted rays (closest hit), each ray carrying its
-//! pixel and path weight ([`shade::Path`]); bounce by bounce until no path is left. The same
+//! in Embree). It runs as *wavefronts*: the camera rays of a run of pixels, in 4×4 tiles, are
+//! traced as one coherent stream; every hit is shaded ([`shade::shade`]) into streams of shadow
+//! feelers (any-hit, one per light) and a stream of reflected and refracted rays (closest hit),
+//! each ray carrying its pixel and path weight ([`shade::Path`]); bounce by bounce until no path
+//! is left. Runs are spread over the rayon pool. The same
 //! optics run depth-first, one ray at a time, in [`Renderer::render_recursive`] (the reference the
 //! tests hold the wavefront to) and [`Renderer::ray_tree`] (the lecture's ray tree of one pixel).
 //!
@@ -136,15 +137,35 @@ pub struct RenderStats {
     pub counts_cut_by_weight: u64,
     pub counts_cut_by_depth: u64,
     pub total_internal_reflections: u64,
-    /// Wall time of the whole render, and of the queries alone.
+    /// Wall time of the whole render.
     pub seconds: f64,
+    /// Thread time (summed over the worker threads) in the queries, and in shading.
     pub trace_seconds: f64,
+    pub shade_seconds: f64,
+    /// Worker threads of the render.
+    pub threads: u32,
 }
 
 impl RenderStats {
     /// All rays traced.
     pub fn total_rays(&self) -> u64 {
         self.rays.iter().sum()
+    }
+
+    /// Share of the workers' time spent in the queries.
+    pub fn query_share(&self) -> f64 {
+        self.trace_seconds / (self.seconds * self.threads.max(1) as f64)
+    }
+
+    fn merge(&mut self, o: &RenderStats) {
+        for k in 0..4 {
+            self.rays[k] += o.rays[k];
+        }
+        self.counts_cut_by_weight += o.counts_cut_by_weight;
+        self.counts_cut_by_depth += o.counts_cut_by_depth;
+        self.total_internal_reflections += o.total_internal_reflections;
+        self.trace_seconds += o.trace_seconds;
+        self.shade_seconds += o.shade_seconds;
     }
 
     fn add(&mut self, c: &ShadeCounts) {
@@ -171,10 +192,8 @@ pub struct TreeNode {
     pub weight: [f32; 3],
 }
 
-/// Rays traced per batch of camera samples (bounds the wavefront's memory: about 100 bytes each).
-const BATCH: usize = 1 << 18;
-/// Rays shaded per parallel task.
-const SHADE_CHUNK: usize = 4096;
+/// Camera rays per wavefront: one parallel task, and the longest stream it traces.
+pub const WAVE: usize = 4096;
 
 /// A renderer over query backend `Q`.
 pub struct Renderer<'a, Q: Query> {
@@ -184,14 +203,17 @@ pub struct Renderer<'a, Q: Query> {
     pub settings: Settings,
 }
 
-/// Outputs of shading one chunk of a bounce.
+/// The reusable buffers of one wavefront (one per worker thread).
 #[derive(Default)]
-struct ChunkOut {
-    radiance: Vec<(u32, Vec3)>,
-    /// (light, ray, pixel, radiance if unblocked)
-    shadows: Vec<(u32, Ray, u32, Vec3)>,
-    children: Vec<(Ray, Path, RayKind)>,
-    counts: ShadeCounts,
+struct Wave {
+    rays: RayStream,
+    paths: Vec<Path>,
+    hits: HitStream,
+    /// Per light: shadow feelers and, per feeler, (pixel, radiance if unblocked).
+    shadows: Vec<(RayStream, Vec<(u32, Vec3)>)>,
+    occluded: Vec<bool>,
+    next_rays: RayStream,
+    next_paths: Vec<Path>,
 }
 
 impl<Q: Query> Renderer<'_, Q> {
@@ -215,119 +237,120 @@ impl<Q: Query> Renderer<'_, Q> {
     }
 
     /// Renders the image as a wavefront on the current rayon pool. `progress` is called with
-    /// the number of camera samples finished so far (of `width · height · spp`).
+    /// the number of camera samples finished so far (of `width · height · spp`), from any thread.
+    ///
+    /// The image's pixels, in 4×4-tile order, are cut into runs of about [`WAVE`] camera rays;
+    /// each run is one wavefront, traced bounce by bounce on one thread (streams of up to
+    /// `WAVE` rays, and the shadow feelers of each bounce light by light), and the runs are
+    /// spread over the pool. A run's rays carry their pixel's index within the run, and each run
+    /// sums into its own pixels, so no bounce has a serial gather step and no two threads share
+    /// a pixel.
     pub fn render(&self, progress: &(dyn Fn(u64) + Sync)) -> Result<(Image, RenderStats)> {
         self.check()?;
         let start = Instant::now();
         let s = &self.settings;
-        let mut stats = RenderStats::default();
-        let mut acc = vec![Vec3::ZERO; s.width as usize * s.height as usize];
         let pixels = tile_order(s.width, s.height);
-        let per_batch = (BATCH / s.spp as usize).max(1);
-        let mut rays = RayStream::with_capacity(BATCH);
-        let mut paths: Vec<Path> = Vec::with_capacity(BATCH);
-        let mut hits = HitStream::misses(0);
-        let mut shadow_rays = RayStream::with_capacity(BATCH);
-        let mut shadow_info: Vec<(u32, Vec3)> = Vec::with_capacity(BATCH);
-        let mut occluded = Vec::new();
-        let mut outs: Vec<ChunkOut> = Vec::new();
-        let mut done = 0u64;
-        for batch in pixels.chunks(per_batch) {
-            // Camera rays: sample-major, each sample's pixels in tile order (coherent packets).
-            rays.clear();
-            paths.clear();
-            for sample in 0..s.spp {
-                for &(x, y) in batch {
-                    let pixel = y * s.width + x;
-                    if let Some(r) = self.camera_ray(x, y, sample) {
-                        rays.push(&r);
-                        let path = Path { pixel, depth: 0, weight: Vec3::ONE, media: Default::default() };
-                        paths.push(path);
-                    }
-                }
-            }
-            stats.rays[RayKind::Primary as usize] += rays.len() as u64;
-            let mut bounce = 0;
-            while !rays.is_empty() {
-                let coherence = if bounce == 0 { Coherence::Coherent } else { Coherence::Incoherent };
-                let t0 = Instant::now();
-                self.query.intersect_stream_par(&rays, &mut hits, coherence);
-                stats.trace_seconds += t0.elapsed().as_secs_f64();
-
-                // Shade every hit, chunk by chunk in parallel, into per-chunk outputs.
-                let chunks = rays.len().div_ceil(SHADE_CHUNK);
-                outs.resize_with(chunks.max(outs.len()), ChunkOut::default);
-                outs[..chunks].par_iter_mut().enumerate().for_each(|(c, out)| {
-                    out.radiance.clear();
-                    out.shadows.clear();
-                    out.children.clear();
-                    out.counts = ShadeCounts::default();
-                    for i in c * SHADE_CHUNK..((c + 1) * SHADE_CHUNK).min(rays.len()) {
-                        let ray = rays.get(i);
-                        let hit = hits.get(i);
-                        let path = &paths[i];
-                        shade::shade(self.world, s, &ray, hit.as_ref(), path, &mut out.counts, |e| match e {
-                            Emission::Radiance(c) => out.radiance.push((path.pixel, c)),
-                            Emission::Shadow { ray, radiance, light } => {
-                                out.shadows.push((light, ray, path.pixel, radiance))
-                            }
-                            Emission::Child { ray, path, kind } => out.children.push((ray, path, kind)),
-                        });
-                    }
-                });
-
-                // Gather in ray order: radiance, then shadow feelers light by light (each light's
-                // feelers together, so packets share a direction), then the next bounce.
-                shadow_rays.clear();
-                shadow_info.clear();
-                for out in &outs[..chunks] {
-                    for &(p, c) in &out.radiance {
-                        acc[p as usize] += c;
-                    }
-                    stats.add(&out.counts);
-                }
-                for light in 0..self.world.lights.len() as u32 {
-                    for out in &outs[..chunks] {
-                        for (l, r, p, c) in &out.shadows {
-                            if *l == light {
-                                shadow_rays.push(r);
-                                shadow_info.push((*p, *c));
-                            }
-                        }
-                    }
-                }
-                if !shadow_rays.is_empty() {
-                    let t0 = Instant::now();
-                    self.query.occluded_stream_par(&shadow_rays, &mut occluded, coherence);
-                    stats.trace_seconds += t0.elapsed().as_secs_f64();
-                    stats.rays[RayKind::Shadow as usize] += shadow_rays.len() as u64;
-                    for (&(p, c), &o) in shadow_info.iter().zip(&occluded) {
-                        if !o {
-                            acc[p as usize] += c;
-                        }
-                    }
-                }
-                rays.clear();
-                paths.clear();
-                for out in &outs[..chunks] {
-                    for (r, p, k) in &out.children {
-                        rays.push(r);
-                        paths.push(*p);
-                        stats.rays[*k as usize] += 1;
-                    }
-                }
-                bounce += 1;
-            }
-            done += batch.len() as u64 * s.spp as u64;
-            progress(done);
-        }
-        let scale = 1.0 / s.spp as f32;
+        let per_run = (WAVE / s.spp as usize).max(1);
+        let done = std::sync::atomic::AtomicU64::new(0);
+        let runs: Vec<(Vec<Vec3>, RenderStats)> = pixels
+            .par_chunks(per_run)
+            .with_max_len(1)
+            .map_init(Wave::default, |wave, run| {
+                let out = self.wavefront(wave, run);
+                let n = done.fetch_add(run.len() as u64 * s.spp as u64, std::sync::atomic::Ordering::Relaxed);
+                progress(n + run.len() as u64 * s.spp as u64);
+                out
+            })
+            .collect();
+        let mut stats = RenderStats { threads: rayon::current_num_threads() as u32, ..Default::default() };
         let mut image = Image::new(s.width, s.height);
-        for (o, a) in image.pixels.iter_mut().zip(&acc) {
-            *o = *a * scale;
+        let scale = 1.0 / s.spp as f32;
+        for (run, (acc, st)) in pixels.chunks(per_run).zip(&runs) {
+            for (&(x, y), a) in run.iter().zip(acc) {
+                image.pixels[(y * s.width + x) as usize] = *a * scale;
+            }
+            stats.merge(st);
         }
         stats.seconds = start.elapsed().as_secs_f64();
         Ok((image, stats))
+    }
+
+    /// One wavefront over the pixels `run`: returns their summed samples and the statistics.
+    fn wavefront(&self, w: &mut Wave, run: &[(u32, u32)]) -> (Vec<Vec3>, RenderStats) {
+        let s = &self.settings;
+        let mut stats = RenderStats::default();
+        let mut acc = vec![Vec3::ZERO; run.len()];
+        // Camera rays: sample-major, each sample's pixels in tile order (coherent packets).
+        w.rays.clear();
+        w.paths.clear();
+        for sample in 0..s.spp {
+            for (i, &(x, y)) in run.iter().enumerate() {
+                if let Some(r) = self.camera_ray(x, y, sample) {
+                    w.rays.push(&r);
+                    w.paths.push(Path { pixel: i as u32, depth: 0, weight: Vec3::ONE, media: Default::default() });
+                }
+            }
+        }
+        stats.rays[RayKind::Primary as usize] += w.rays.len() as u64;
+        let lights = self.world.lights.len();
+        w.shadows.resize_with(lights, Default::default);
+        let mut bounce = 0;
+        while !w.rays.is_empty() {
+            let coherence = if bounce == 0 { Coherence::Coherent } else { Coherence::Incoherent };
+            let t0 = Instant::now();
+            self.query.intersect_stream(&w.rays, &mut w.hits, coherence);
+            stats.trace_seconds += t0.elapsed().as_secs_f64();
+
+            let t0 = Instant::now();
+            for (rays, info) in &mut w.shadows {
+                rays.clear();
+                info.clear();
+            }
+            w.next_rays.clear();
+            w.next_paths.clear();
+            let mut counts = ShadeCounts::default();
+            for i in 0..w.rays.len() {
+                let ray = w.rays.get(i);
+                let hit = w.hits.get(i);
+                let path = &w.paths[i];
+                let (shadows, next_rays, next_paths) = (&mut w.shadows, &mut w.next_rays, &mut w.next_paths);
+                shade::shade(self.world, s, &ray, hit.as_ref(), path, &mut counts, |e| match e {
+                    Emission::Radiance(c) => acc[path.pixel as usize] += c,
+                    Emission::Shadow { ray, radiance, light } => {
+                        let (rays, info) = &mut shadows[light as usize];
+                        rays.push(&ray);
+                        info.push((path.pixel, radiance));
+                    }
+                    Emission::Child { ray, path, kind } => {
+                        next_rays.push(&ray);
+                        next_paths.push(path);
+                        stats.rays[kind as usize] += 1;
+                    }
+                });
+            }
+            stats.add(&counts);
+            stats.shade_seconds += t0.elapsed().as_secs_f64();
+
+            // Shadow feelers, light by light (each light's feelers share a direction).
+            for (rays, info) in &w.shadows {
+                if rays.is_empty() {
+                    continue;
+                }
+                let t0 = Instant::now();
+                self.query.occluded_stream(rays, &mut w.occluded, coherence);
+                stats.trace_seconds += t0.elapsed().as_secs_f64();
+                stats.rays[RayKind::Shadow as usize] += rays.len() as u64;
+                for (&(p, c), &o) in info.iter().zip(&w.occluded) {
+                    if !o {
+                        acc[p as usize] += c;
+                    }
+                }
+            }
+            std::mem::swap(&mut w.rays, &mut w.next_rays);
+            std::mem::swap(&mut w.paths, &mut w.next_paths);
+            bounce += 1;
+        }
+        (acc, stats)
     }
 
     /// Renders depth-first, one ray at a time, pixel by pixel in parallel: the textbook recursion,
@@ -359,13 +382,9 @@ impl<Q: Query> Renderer<'_, Q> {
         let mut stats = RenderStats::default();
         for (y, (row, st)) in rows.into_iter().enumerate() {
             image.pixels[y * s.width as usize..][..s.width as usize].copy_from_slice(&row);
-            for k in 0..4 {
-                stats.rays[k] += st.rays[k];
-            }
-            stats.counts_cut_by_weight += st.counts_cut_by_weight;
-            stats.counts_cut_by_depth += st.counts_cut_by_depth;
-            stats.total_internal_reflections += st.total_internal_reflections;
+            stats.merge(&st);
         }
+        stats.threads = rayon::current_num_threads() as u32;
         stats.seconds = start.elapsed().as_secs_f64();
         Ok((image, stats))
     }
