@@ -89,6 +89,30 @@ pub fn sphereflake(levels: u32, stacks: u32, slices: u32) -> TriangleMesh {
     TriangleMesh::new("sphereflake", p, idx).expect("indices are generated in range")
 }
 
+/// An axis-aligned box from `min` to `max`: 12 triangles wound counter-clockwise seen from
+/// outside (normals point out).
+pub fn cuboid(min: Vec3, max: Vec3) -> TriangleMesh {
+    let p = |i: u32| {
+        Vec3::new(
+            if i & 1 == 0 { min.x } else { max.x },
+            if i & 2 == 0 { min.y } else { max.y },
+            if i & 4 == 0 { min.z } else { max.z },
+        )
+    };
+    let positions: Vec<Vec3> = (0..8).map(p).collect();
+    // Faces as corner quads (a, b, c, d) counter-clockwise from outside.
+    let faces = [[0, 4, 6, 2], [1, 3, 7, 5], [0, 1, 5, 4], [2, 6, 7, 3], [0, 2, 3, 1], [4, 5, 7, 6]];
+    let indices = faces.iter().flat_map(|&[a, b, c, d]| [[a, b, c], [a, c, d]]).collect();
+    TriangleMesh::new("box", positions, indices).expect("eight corners, valid indices")
+}
+
+/// A `sx × sz` rectangle in the plane y = 0, centred on the origin, facing +y: 2 triangles.
+pub fn quad(sx: f32, sz: f32) -> TriangleMesh {
+    let (x, z) = (0.5 * sx, 0.5 * sz);
+    let positions = vec![Vec3::new(-x, 0.0, -z), Vec3::new(-x, 0.0, z), Vec3::new(x, 0.0, z), Vec3::new(x, 0.0, -z)];
+    TriangleMesh::new("quad", positions, vec![[0, 1, 2], [0, 2, 3]]).expect("four corners, valid indices")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -121,28 +145,4 @@ mod tests {
         let per = 2 * 4 * 6 - 2 * 6;
         assert_eq!(m.triangle_count(), (1 + 9 + 81) * per);
     }
-}
-
-/// An axis-aligned box from `min` to `max`: 12 triangles wound counter-clockwise seen from
-/// outside (normals point out).
-pub fn cuboid(min: Vec3, max: Vec3) -> TriangleMesh {
-    let p = |i: u32| {
-        Vec3::new(
-            if i & 1 == 0 { min.x } else { max.x },
-            if i & 2 == 0 { min.y } else { max.y },
-            if i & 4 == 0 { min.z } else { max.z },
-        )
-    };
-    let positions: Vec<Vec3> = (0..8).map(p).collect();
-    // Faces as corner quads (a, b, c, d) counter-clockwise from outside.
-    let faces = [[0, 4, 6, 2], [1, 3, 7, 5], [0, 1, 5, 4], [2, 6, 7, 3], [0, 2, 3, 1], [4, 5, 7, 6]];
-    let indices = faces.iter().flat_map(|&[a, b, c, d]| [[a, b, c], [a, c, d]]).collect();
-    TriangleMesh::new("box", positions, indices).expect("eight corners, valid indices")
-}
-
-/// A `sx × sz` rectangle in the plane y = 0, centred on the origin, facing +y: 2 triangles.
-pub fn quad(sx: f32, sz: f32) -> TriangleMesh {
-    let (x, z) = (0.5 * sx, 0.5 * sz);
-    let positions = vec![Vec3::new(-x, 0.0, -z), Vec3::new(-x, 0.0, z), Vec3::new(x, 0.0, z), Vec3::new(x, 0.0, -z)];
-    TriangleMesh::new("quad", positions, vec![[0, 1, 2], [0, 2, 3]]).expect("four corners, valid indices")
 }

@@ -97,10 +97,10 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
     settings.max_depth = args.max_depth.unwrap_or(settings.max_depth);
     settings.bailout = args.bailout.unwrap_or(settings.bailout);
     settings.check()?;
-    if let Some((x, y)) = args.ray_tree {
-        if x >= settings.width || y >= settings.height {
-            anyhow::bail!("--ray-tree {x},{y} lies outside the {}×{} image", settings.width, settings.height);
-        }
+    if let Some((x, y)) = args.ray_tree
+        && (x >= settings.width || y >= settings.height)
+    {
+        anyhow::bail!("--ray-tree {x},{y} lies outside the {}×{} image", settings.width, settings.height);
     }
 
     let t0 = Instant::now();

@@ -85,10 +85,10 @@ impl Light {
         if !(self.color.is_finite() && self.color.min_element() >= 0.0) {
             return Err(format!("color {} must be finite and not negative", self.color));
         }
-        if let Some(f) = self.fade {
-            if !(f.is_finite() && f > 0.0) {
-                return Err(format!("fade distance {f} must be finite and positive"));
-            }
+        if let Some(f) = self.fade
+            && !(f.is_finite() && f > 0.0)
+        {
+            return Err(format!("fade distance {f} must be finite and positive"));
         }
         match self.kind {
             LightKind::Point => Ok(()),

@@ -108,10 +108,10 @@ impl Material {
         if !(self.shininess.is_finite() && self.shininess >= 0.0) {
             return Err(format!("`shininess` {} must be finite and not negative", self.shininess));
         }
-        if let Some(Texture::Checker { other, size }) = self.texture {
-            if !(other.is_finite() && other.min_element() >= 0.0 && size.is_finite() && size > 0.0) {
-                return Err(format!("checker colour {other} and size {size} must be finite, not negative, size > 0"));
-            }
+        if let Some(Texture::Checker { other, size }) = self.texture
+            && !(other.is_finite() && other.min_element() >= 0.0 && size.is_finite() && size > 0.0)
+        {
+            return Err(format!("checker colour {other} and size {size} must be finite, not negative, size > 0"));
         }
         Ok(())
     }

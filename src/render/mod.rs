@@ -115,10 +115,10 @@ impl World {
         for (i, l) in self.lights.iter().enumerate() {
             l.check().or_else(|e| bad(format!("light {i}: {e}")))?;
         }
-        if let Some(m) = self.surfaces.max_material() {
-            if m as usize >= self.materials.len() {
-                return bad(format!("a surface names material {m}, but there are {}", self.materials.len()));
-            }
+        if let Some(m) = self.surfaces.max_material()
+            && m as usize >= self.materials.len()
+        {
+            return bad(format!("a surface names material {m}, but there are {}", self.materials.len()));
         }
         for (name, c) in [("ambient", self.ambient), ("background", self.background)] {
             if !(c.is_finite() && c.min_element() >= 0.0) {
