@@ -254,6 +254,8 @@ fn the_command_line_renders_and_fails_cleanly() {
     let tree: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("w.raytree.json")).unwrap()).unwrap();
     assert!(tree["rays"].as_array().unwrap().len() >= 2);
+    let picture = image::open(dir.join("w.raytree.png")).unwrap();
+    assert_eq!((picture.width(), picture.height()), (64, 48));
     // Bad input: an error message, a failing exit code, no image.
     let bad = dir.join("bad.png");
     for args in [
@@ -271,6 +273,31 @@ fn the_command_line_renders_and_fails_cleanly() {
         run(&["render", scene.to_str().unwrap(), "-o", missing_dir.to_str().unwrap(), "--width", "8", "--height", "8"]);
     assert!(!r.status.success());
     let left: Vec<_> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name()).collect();
-    assert_eq!(left.len(), 2, "{left:?}");
+    assert_eq!(left.len(), 3, "{left:?}");
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn ray_tree_picture_draws_every_kind() {
+    let (file, scene, world) = load(&whitted());
+    let settings = Settings { width: 160, height: 120, ..file.render.settings };
+    let r = renderer(&file, &scene, &world, settings);
+    // A pixel on the glass sphere: primary, reflected, refracted and shadow rays.
+    let (nodes, _) = r.ray_tree(112, 62).unwrap();
+    for k in [RayKind::Primary, RayKind::Reflected, RayKind::Refracted, RayKind::Shadow] {
+        assert!(nodes.iter().any(|n| n.kind == k), "{k:?} missing from {nodes:?}");
+    }
+    let view = strahl::render::tree::side_view(&r.camera, &nodes, 60.0).unwrap();
+    let (_, radius) = strahl::render::tree::tree_extent(&nodes).unwrap();
+    let picture = r.ray_tree_picture(&nodes, view, 2.0 * radius).unwrap();
+    let (plain, _) = Renderer { camera: view, ..r }.render(&|_| {}).unwrap();
+    let drawn = picture.pixels.iter().zip(&plain.pixels).filter(|(a, b)| a != b).count();
+    assert!(drawn > 100 && drawn < picture.pixels.len() / 4, "{drawn} pixels drawn");
+    for k in [RayKind::Primary, RayKind::Reflected, RayKind::Refracted] {
+        let c = strahl::render::tree::kind_colour(k, false);
+        assert!(picture.pixels.contains(&c), "no pixel of {k:?}'s colour");
+    }
+    // Only pinhole views.
+    let fish = strahl::render::RenderCamera { projection: strahl::render::Projection::Panorama, ..view };
+    assert!(r.ray_tree_picture(&nodes, fish, 1.0).is_err());
 }

@@ -4,8 +4,9 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use clap::{Parser, Subcommand, ValueEnum};
+use glam::Vec3;
 use indicatif::{ProgressBar, ProgressStyle};
-use strahl::render::{RayKind, Renderer};
+use strahl::render::{Projection, RayKind, RenderCamera, Renderer};
 use strahl::{BuildConfig, InstancedScene, SceneFile};
 
 #[derive(Parser)]
@@ -53,9 +54,16 @@ struct RenderArgs {
     threads: usize,
     #[arg(long, value_enum, default_value = "strahl")]
     backend: Backend,
-    /// Also write the ray tree of pixel X,Y as JSON next to the image (`<output>.raytree.json`).
+    /// Also write the ray tree of pixel X,Y next to the image: every ray as JSON
+    /// (`<output>.raytree.json`) and drawn over the scene seen from a second viewpoint
+    /// (`<output>.raytree.png`; primary white, shadow yellow or dark red when blocked, reflected
+    /// blue, refracted magenta).
     #[arg(long, value_name = "X,Y", value_parser = parse_pixel)]
     ray_tree: Option<(u32, u32)>,
+    /// The ray-tree picture's viewpoint and target (default: beside the camera, looking at the
+    /// tree).
+    #[arg(long, value_name = "EX,EY,EZ,AX,AY,AZ", value_parser = parse_view)]
+    ray_tree_view: Option<[f32; 6]>,
     /// Trace depth-first, one ray at a time (the textbook recursion), instead of the wavefront.
     #[arg(long)]
     recursive: bool,
@@ -64,6 +72,16 @@ struct RenderArgs {
 fn parse_pixel(s: &str) -> Result<(u32, u32), String> {
     let (x, y) = s.split_once(',').ok_or("expected X,Y")?;
     Ok((x.trim().parse().map_err(|e| format!("X: {e}"))?, y.trim().parse().map_err(|e| format!("Y: {e}"))?))
+}
+
+fn parse_view(s: &str) -> Result<[f32; 6], String> {
+    let v: Vec<f32> =
+        s.split(',').map(|x| x.trim().parse::<f32>().map_err(|e| format!("{x}: {e}"))).collect::<Result<_, _>>()?;
+    let v: [f32; 6] = v.try_into().map_err(|_| "expected six numbers: eye x, y, z and target x, y, z".to_string())?;
+    if v.iter().any(|x| !x.is_finite()) {
+        return Err("the view must be finite".into());
+    }
+    Ok(v)
 }
 
 fn main() -> anyhow::Result<()> {
@@ -159,6 +177,22 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
         std::fs::write(&path, serde_json::to_string_pretty(&json)?)
             .map_err(|e| anyhow::anyhow!("cannot write {}: {e}", path.display()))?;
         println!("{}: ray tree of pixel ({x}, {y}), {} rays", path.display(), nodes.len());
+        // Rays that leave the scene are drawn as long as the tree is wide.
+        let miss = strahl::render::tree::tree_extent(&nodes).map_or(1.0, |(_, r)| 2.0 * r);
+        let view = match args.ray_tree_view {
+            Some(v) => RenderCamera::look_at(
+                Vec3::new(v[0], v[1], v[2]),
+                Vec3::new(v[3], v[4], v[5]),
+                camera.up,
+                Projection::Pinhole { fov_deg: 60.0 },
+            ),
+            None => strahl::render::tree::side_view(&camera, &nodes, 60.0),
+        }
+        .ok_or_else(|| anyhow::anyhow!("--ray-tree-view: the eye and target must differ"))?;
+        let picture = pool.install(|| renderer.ray_tree_picture(&nodes, view, miss))?;
+        let path = args.output.with_extension("raytree.png");
+        picture.write(&path)?;
+        println!("{}: the ray tree seen from {}", path.display(), view.eye);
     }
     Ok(())
 }

@@ -19,6 +19,7 @@ pub mod light;
 pub mod material;
 pub mod shade;
 pub mod surface;
+pub mod tree;
 
 use std::time::Instant;
 
