@@ -542,11 +542,23 @@ struct RawLight {
     color: Option<Rgb>,
     intensity: Option<f32>,
     direction: Option<[f32; 3]>,
-    /// Spot: full intensity within this half-angle (degrees).
+    /// Spot: full intensity within this half-angle (degrees). Sphere: the radius.
     radius: Option<f32>,
     /// Spot: no light beyond this half-angle (degrees).
     falloff: Option<f32>,
     fade: Option<f32>,
+    /// Rect: the edge vectors.
+    u: Option<[f32; 3]>,
+    v: Option<[f32; 3]>,
+    /// Rect: `[n0, n1]` (or one number for both); sphere: one number.
+    samples: Option<Samples>,
+}
+
+#[derive(Clone, Copy, Deserialize)]
+#[serde(untagged)]
+enum Samples {
+    Both(u32),
+    Each([u32; 2]),
 }
 
 impl RawLight {
@@ -580,7 +592,23 @@ impl RawLight {
                 };
                 (position()?, kind)
             }
-            other => return Err(format!("kind `{other}` is none of point, directional, spot")),
+            "rect" => {
+                let edge =
+                    |e: Option<[f32; 3]>, k: &str| e.map(Vec3::from).ok_or_else(|| format!("needs an edge `{k}`"));
+                let n = match self.samples.unwrap_or(Samples::Both(4)) {
+                    Samples::Both(n) => [n, n],
+                    Samples::Each(n) => n,
+                };
+                (position()?, LightKind::Rect { u: edge(self.u, "u")?, v: edge(self.v, "v")?, n })
+            }
+            "sphere" => {
+                let n = match self.samples.unwrap_or(Samples::Both(16)) {
+                    Samples::Both(n) => n,
+                    Samples::Each(_) => return Err("a sphere light's `samples` is one number".into()),
+                };
+                (position()?, LightKind::Sphere { radius: self.radius.ok_or("needs a `radius`")?, n })
+            }
+            other => return Err(format!("kind `{other}` is none of point, directional, spot, rect, sphere")),
         };
         Ok(Light { position, color, kind, fade: self.fade })
     }

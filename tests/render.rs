@@ -301,3 +301,60 @@ fn ray_tree_picture_draws_every_kind() {
     let fish = strahl::render::RenderCamera { projection: strahl::render::Projection::Panorama, ..view };
     assert!(r.ray_tree_picture(&nodes, fish, 1.0).is_err());
 }
+
+#[test]
+fn area_lights_cast_soft_shadows() {
+    // A floor, a box above it, a light above the box; seen straight down. A point light casts a
+    // hard shadow (every floor pixel fully lit or fully dark); a rectangle light of the same
+    // centre casts a penumbra of pixels in between, and splits its light so the lit floor far
+    // from the box is as bright as under the point light.
+    let scene = |light: &str| {
+        format!(
+            r#"
+[camera]
+projection = "orthographic"
+width = 8.0
+eye = [0.0, 10.0, 0.0]
+look_at = [0.0, 0.0, 0.0]
+up = [0.0, 0.0, 1.0]
+[render]
+ambient = 0.0
+{light}
+[material.floor]
+color = 1.0
+ambient = 0.0
+[mesh.floor]
+quad = {{ size = [20.0, 20.0] }}
+material = "floor"
+[mesh.block]
+box = {{ min = [-1.0, 1.0, -1.0], max = [1.0, 1.5, 1.0] }}
+material = "floor"
+[[instance]]
+mesh = "floor"
+[[instance]]
+mesh = "block"
+"#
+        )
+    };
+    let levels = |light: &str| {
+        let (file, scene, world) = load(&scene(light));
+        let settings = Settings { width: 64, height: 64, ..Settings::default() };
+        let (img, stats) = renderer(&file, &scene, &world, settings).render(&|_| {}).unwrap();
+        // Floor pixels only: the box's top is nearer the light and brighter.
+        let floor: Vec<f32> = img.pixels.iter().map(|p| p.x).collect();
+        (floor, stats)
+    };
+    let (hard, hs) = levels("[[light]]\nposition = [0.0, 4.0, 0.0]\n");
+    let (soft, ss) = levels(
+        "[[light]]\nkind = \"rect\"\nposition = [0.0, 4.0, 0.0]\nu = [3.0, 0.0, 0.0]\nv = [0.0, 0.0, 3.0]\nsamples = [4, 4]\n",
+    );
+    assert_eq!(ss.rays[RayKind::Shadow as usize], 16 * hs.rays[RayKind::Shadow as usize]);
+    let lit = hard[0];
+    let dark = hard.iter().filter(|&&x| x == 0.0).count();
+    let between = |img: &[f32]| img.iter().filter(|&&x| x > 0.02 * lit && x < 0.6 * lit).count();
+    assert!(dark > 100, "the point light's umbra: {dark} pixels");
+    assert_eq!(between(&hard), 0, "a point light casts no penumbra");
+    assert!(between(&soft) > 100, "the rectangle's penumbra: {} pixels", between(&soft));
+    // The corner pixel sees the whole rectangle: about as lit as under the point light.
+    assert!((soft[0] - lit).abs() < 0.05 * lit, "{} vs {lit}", soft[0]);
+}

@@ -15,8 +15,10 @@
 //!   `fade_power 1001` (exponential), `fade_distance 1/k`, `fade_color 1 − α/k`, k = max α
 //!   (POV-Ray multiplies by `exp(−(1 − fade_color)·d / fade_distance)`);
 //! - checker → `pigment { checker rgb a, rgb b scale s }`;
-//! - lights: `light_source` (point), `spotlight radius falloff point_at`, `parallel point_at`;
-//!   `fade` → `fade_distance f fade_power 2` (the same `2 / (1 + (d/f)²)`);
+//! - lights: `light_source` (point), `spotlight radius falloff point_at`, `parallel point_at`,
+//!   rect → `area_light u, v, n0, n1 jitter` (POV-Ray's grid spans the edges, strahl's strata
+//!   their cells), sphere → `area_light … circular orient jitter`; `fade` → `fade_distance f
+//!   fade_power 2` (the same `2 / (1 + (d/f)²)`);
 //! - `global_settings { assumed_gamma 1 max_trace_level depth+1 adc_bailout ambient_light }`,
 //!   `background`; one sample per pixel (`-A`), else adaptive anti-aliasing off and `+AM1 +R`.
 //!
@@ -144,6 +146,24 @@ pub fn export(file: &SceneFile, objects: &[Vec<TriangleMesh>], settings: &Settin
                 cos_outer.acos().to_degrees(),
                 v(l.position + direction)
             ),
+            LightKind::Rect { u, v: e2, n } => format!(
+                "{} color rgb {} area_light {}, {}, {}, {} jitter adaptive 0{fade}",
+                v(l.position),
+                v(l.color),
+                v(u),
+                v(e2),
+                n[0].max(2),
+                n[1].max(2)
+            ),
+            LightKind::Sphere { radius, n } => {
+                let k = ((n as f32).sqrt().round() as u32).max(2);
+                format!(
+                    "{} color rgb {} area_light <{d}, 0, 0>, <0, 0, {d}>, {k}, {k} circular orient jitter adaptive 0{fade}",
+                    v(l.position),
+                    v(l.color),
+                    d = 2.0 * radius
+                )
+            }
         };
         writeln!(s, "light_source {{ {body} }}")?;
     }

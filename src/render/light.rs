@@ -1,7 +1,14 @@
-//! Light sources of the local illumination model: point, directional and spot lights, each with a
-//! colour (intensity folded in) and an optional distance fade.
+//! Light sources of the local illumination model: point, directional and spot lights, and area
+//! lights (a rectangle, or a disc facing the lit point: POV-Ray's `area_light … circular orient`)
+//! sampled by several shadow feelers for soft shadows; each with a colour (intensity folded in) and
+//! an optional distance fade.
 
 use glam::Vec3;
+
+use crate::raygen::Pcg32;
+
+/// Most samples of one area light per lit point.
+pub const MAX_LIGHT_SAMPLES: u32 = 1024;
 
 /// What kind of light, with its shape parameters.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -14,6 +21,13 @@ pub enum LightKind {
     /// `cos_inner` of the axis, none beyond `cos_outer`, a smoothstep between (POV-Ray's
     /// `radius` and `falloff`).
     Spot { direction: Vec3, cos_inner: f32, cos_outer: f32 },
+    /// A rectangle centred on `Light::position` with edge vectors `u` and `v`, sampled on an
+    /// `n[0] × n[1]` grid of strata, each jittered; every sample an omnidirectional point light
+    /// of `color / (n[0]·n[1])` (POV-Ray's `area_light u, v, n0, n1 jitter`).
+    Rect { u: Vec3, v: Vec3, n: [u32; 2] },
+    /// A disc of `radius` centred on `Light::position`, turned to face each lit point, sampled on
+    /// `n` jittered strata (polar, equal area) (POV-Ray's `area_light … circular orient`).
+    Sphere { radius: f32, n: u32 },
 }
 
 /// A light source.
@@ -46,13 +60,56 @@ impl Light {
         Self { position, color, kind: LightKind::Point, fade: None }
     }
 
+    /// Shadow feelers this light needs per lit point: 1, or an area light's sample count.
+    pub fn samples(&self) -> u32 {
+        match self.kind {
+            LightKind::Rect { n, .. } => n[0] * n[1],
+            LightKind::Sphere { n, .. } => n,
+            _ => 1,
+        }
+    }
+
     /// The light's contribution arriving at `p`, or `None` where it sends none (outside a spot's
-    /// cone, at the light's own position).
+    /// cone, at the light's own position). Area lights answer as a point light at their centre.
     pub fn incident(&self, p: Vec3) -> Option<Incident> {
+        self.arriving(p, self.position)
+    }
+
+    /// Sample `s` (of [`samples`](Self::samples)) of the light seen from `p`: what arrives, and
+    /// the point the shadow feeler must reach (`None` for directional light). `rng` jitters area
+    /// lights' strata.
+    pub fn sample(&self, p: Vec3, s: u32, rng: &mut Pcg32) -> Option<(Incident, Option<Vec3>)> {
+        let target = match self.kind {
+            LightKind::Directional { .. } => return self.incident(p).map(|i| (i, None)),
+            LightKind::Point | LightKind::Spot { .. } => self.position,
+            LightKind::Rect { u, v, n } => {
+                let (a, b) = ((s % n[0]) as f32 + rng.next_f32(), (s / n[0]) as f32 + rng.next_f32());
+                self.position + u * (a / n[0] as f32 - 0.5) + v * (b / n[1] as f32 - 0.5)
+            }
+            LightKind::Sphere { radius, n } => {
+                // Equal-area strata of the disc: rings by r², then the angle.
+                let rings = (n as f32).sqrt().ceil() as u32;
+                let per = n.div_ceil(rings);
+                let (ring, k) = (s / per, s % per);
+                let r = radius * ((ring as f32 + rng.next_f32()) / rings as f32).sqrt();
+                let phi = std::f32::consts::TAU * (k as f32 + rng.next_f32()) / per as f32;
+                let w = (p - self.position).normalize_or(Vec3::Y);
+                let e1 = w.any_orthonormal_vector();
+                let e2 = w.cross(e1);
+                self.position + (e1 * phi.cos() + e2 * phi.sin()) * r
+            }
+        };
+        let inc = self.arriving(p, target)?;
+        let share = 1.0 / self.samples() as f32;
+        Some((Incident { color: inc.color * share, ..inc }, Some(target)))
+    }
+
+    /// What a light at `target` (its position, or a sample of its area) sends to `p`.
+    fn arriving(&self, p: Vec3, target: Vec3) -> Option<Incident> {
         let (dir, dist) = match self.kind {
             LightKind::Directional { direction } => (-direction, f32::INFINITY),
-            LightKind::Point | LightKind::Spot { .. } => {
-                let v = self.position - p;
+            _ => {
+                let v = target - p;
                 let d = v.length();
                 if !(d > 0.0 && d.is_finite()) {
                     return None;
@@ -100,6 +157,27 @@ impl Light {
             LightKind::Spot { cos_inner, cos_outer, .. } if !(cos_inner >= cos_outer && cos_outer > -1.0) => {
                 Err("a spot's radius must not exceed its falloff, and the falloff be under 180°".into())
             }
+            LightKind::Rect { u, v, n } => {
+                let lim = crate::MAX_COORDINATE;
+                if !(u.is_finite() && v.is_finite() && u.abs().max_element() <= lim && v.abs().max_element() <= lim)
+                    || u.cross(v).length_squared() == 0.0
+                {
+                    return Err(format!("edges {u} and {v} must be finite, non-zero and not parallel"));
+                }
+                if n[0] == 0 || n[1] == 0 || n[0] as u64 * n[1] as u64 > MAX_LIGHT_SAMPLES as u64 {
+                    return Err(format!("samples {n:?}: each at least 1, at most {MAX_LIGHT_SAMPLES} in all"));
+                }
+                Ok(())
+            }
+            LightKind::Sphere { radius, n } => {
+                if !(radius.is_finite() && radius > 0.0 && radius <= crate::MAX_COORDINATE) {
+                    return Err(format!("radius {radius} must be finite and positive"));
+                }
+                if !(1..=MAX_LIGHT_SAMPLES).contains(&n) {
+                    return Err(format!("samples {n}: at least 1, at most {MAX_LIGHT_SAMPLES}"));
+                }
+                Ok(())
+            }
             _ => Ok(()),
         }
     }
@@ -135,6 +213,39 @@ mod tests {
         assert!(l.incident(Vec3::new(2.0, 0.0, 0.0)).is_none());
         let mid = l.incident(Vec3::new(0.8, 0.0, 0.0)).unwrap().color.x;
         assert!(mid > 0.0 && mid < 1.0, "{mid}");
+    }
+
+    #[test]
+    fn area_lights_split_their_light_over_their_samples() {
+        let mut rng = Pcg32::new(1, 2);
+        let rect = Light {
+            position: Vec3::new(0.0, 4.0, 0.0),
+            color: Vec3::ONE,
+            kind: LightKind::Rect { u: Vec3::X * 2.0, v: Vec3::Z * 2.0, n: [4, 3] },
+            fade: None,
+        };
+        assert_eq!(rect.samples(), 12);
+        let mut total = Vec3::ZERO;
+        for s in 0..12 {
+            let (inc, target) = rect.sample(Vec3::ZERO, s, &mut rng).unwrap();
+            let t = target.unwrap();
+            // Inside the rectangle, in stratum s.
+            assert!((t.y - 4.0).abs() < 1e-6 && t.x.abs() <= 1.0 && t.z.abs() <= 1.0, "{t}");
+            assert!(t.x >= -1.0 + 0.5 * (s % 4) as f32 - 1e-6 && t.x <= -0.5 + 0.5 * (s % 4) as f32 + 1e-6);
+            total += inc.color;
+        }
+        assert!((total - Vec3::ONE).abs().max_element() < 1e-5);
+        let disc = Light { kind: LightKind::Sphere { radius: 0.5, n: 9 }, ..rect };
+        for s in 0..9 {
+            let (_, t) = disc.sample(Vec3::ZERO, s, &mut rng).unwrap();
+            let d = t.unwrap() - disc.position;
+            // On the disc facing the point (perpendicular to the line to it).
+            assert!(d.length() <= 0.5 + 1e-6 && d.y.abs() < 1e-5, "{d}");
+        }
+        assert!(Light { kind: LightKind::Rect { u: Vec3::X, v: Vec3::X, n: [2, 2] }, ..rect }.check().is_err());
+        assert!(Light { kind: LightKind::Rect { u: Vec3::X, v: Vec3::Z, n: [0, 2] }, ..rect }.check().is_err());
+        assert!(Light { kind: LightKind::Sphere { radius: 0.0, n: 4 }, ..rect }.check().is_err());
+        assert!(Light { kind: LightKind::Sphere { radius: 1.0, n: 5000 }, ..rect }.check().is_err());
     }
 
     #[test]

@@ -10,6 +10,7 @@ use glam::Vec3;
 use super::material::{FresnelMode, beer_lambert, fresnel_exact, fresnel_schlick, reflect, refract};
 use super::{Settings, World};
 use crate::ray::{Hit, Ray, offset_ray_origin};
+use crate::raygen::Pcg32;
 
 /// Most nested media a path keeps track of (glass in water in glass …); deeper ones are ignored.
 pub const MAX_MEDIA: usize = 4;
@@ -137,24 +138,31 @@ pub fn shade(
         if !lit {
             break;
         }
-        let Some(inc) = light.incident(sp.p) else { continue };
-        let cos = ns.dot(inc.dir);
-        if cos <= 0.0 || n_face.dot(inc.dir) <= 0.0 {
-            continue;
-        }
-        let r = reflect(-inc.dir, ns);
-        let spec = if mat.specular == Vec3::ZERO { 0.0 } else { r.dot(-d).max(0.0).powf(mat.shininess) };
-        let radiance = weight * inc.color * (kd * cos + mat.specular * spec);
-        if radiance.max_element() <= 0.0 {
-            continue;
-        }
-        let ray = if inc.dist.is_finite() {
-            // The segment to the light: t in (0, 1) of the unnormalized direction.
-            Ray::segment(shadow_origin, light.position - shadow_origin, 0.0, 1.0)
-        } else {
-            Ray::new(shadow_origin, inc.dir)
+        // Area lights' strata are jittered by a generator seeded with the lit point and the
+        // light, so the image does not depend on the order in which points are shaded.
+        let mut rng = {
+            let b = sp.p.to_array().map(f32::to_bits);
+            Pcg32::new((b[0] as u64) << 32 | b[1] as u64, (b[2] as u64) << 16 ^ li as u64)
         };
-        emit(Emission::Shadow { ray, radiance, light: li as u32 });
+        for s in 0..light.samples() {
+            let Some((inc, target)) = light.sample(sp.p, s, &mut rng) else { continue };
+            let cos = ns.dot(inc.dir);
+            if cos <= 0.0 || n_face.dot(inc.dir) <= 0.0 {
+                continue;
+            }
+            let r = reflect(-inc.dir, ns);
+            let spec = if mat.specular == Vec3::ZERO { 0.0 } else { r.dot(-d).max(0.0).powf(mat.shininess) };
+            let radiance = weight * inc.color * (kd * cos + mat.specular * spec);
+            if radiance.max_element() <= 0.0 {
+                continue;
+            }
+            let ray = match target {
+                // The segment to the light: t in (0, 1) of the unnormalized direction.
+                Some(t) => Ray::segment(shadow_origin, t - shadow_origin, 0.0, 1.0),
+                None => Ray::new(shadow_origin, inc.dir),
+            };
+            emit(Emission::Shadow { ray, radiance, light: li as u32 });
+        }
     }
 
     // Reflection and refraction.
