@@ -288,7 +288,7 @@ impl<Q: Query> Renderer<'_, Q> {
             for (i, &(x, y)) in run.iter().enumerate() {
                 if let Some(r) = self.camera_ray(x, y, sample) {
                     w.rays.push(&r);
-                    w.paths.push(Path { pixel: i as u32, depth: 0, weight: Vec3::ONE, media: Default::default() });
+                    w.paths.push(Path::camera(i as u32, x, y, sample));
                 }
             }
         }
@@ -369,7 +369,7 @@ impl<Q: Query> Renderer<'_, Q> {
                         let mut sum = Vec3::ZERO;
                         for sample in 0..s.spp {
                             if let Some(r) = self.camera_ray(x, y, sample) {
-                                let path = Path { pixel: 0, depth: 0, weight: Vec3::ONE, media: Default::default() };
+                                let path = Path::camera(0, x, y, sample);
                                 sum += self.trace_depth_first(&r, &path, RayKind::Primary, None, &mut st, &mut None);
                             }
                         }
@@ -404,7 +404,7 @@ impl<Q: Query> Renderer<'_, Q> {
         let mut st = RenderStats::default();
         let colour = match self.camera_ray(x, y, 0) {
             Some(r) => {
-                let path = Path { pixel: 0, depth: 0, weight: Vec3::ONE, media: Default::default() };
+                let path = Path::camera(0, x, y, 0);
                 self.trace_depth_first(&r, &path, RayKind::Primary, None, &mut st, &mut Some(&mut nodes))
             }
             None => Vec3::ZERO,

@@ -62,6 +62,26 @@ pub struct Path {
     pub depth: u32,
     pub weight: Vec3,
     pub media: Media,
+    /// Seeds the path's random choices (area lights' jitter): made from the pixel and sample
+    /// of the camera ray, then from the parent's seed and the child's kind, so every backend and
+    /// every thread count draws the same numbers for the same path.
+    pub seed: u64,
+}
+
+impl Path {
+    /// The path of camera sample `sample` of pixel `(x, y)`.
+    pub fn camera(pixel: u32, x: u32, y: u32, sample: u32) -> Self {
+        let seed = mix((x as u64) << 32 | y as u64, sample as u64);
+        Self { pixel, depth: 0, weight: Vec3::ONE, media: Media::default(), seed }
+    }
+}
+
+/// A 64-bit mix of two words (the finalizer of SplitMix64 over their combination).
+fn mix(a: u64, b: u64) -> u64 {
+    let mut z = a ^ b.wrapping_mul(0x9e37_79b9_7f4a_7c15).rotate_left(31);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
 }
 
 /// What shading one ray produced.
@@ -138,12 +158,9 @@ pub fn shade(
         if !lit {
             break;
         }
-        // Area lights' strata are jittered by a generator seeded with the lit point and the
-        // light, so the image does not depend on the order in which points are shaded.
-        let mut rng = {
-            let b = sp.p.to_array().map(f32::to_bits);
-            Pcg32::new((b[0] as u64) << 32 | b[1] as u64, (b[2] as u64) << 16 ^ li as u64)
-        };
+        // Area lights' strata are jittered by a generator seeded with the path and the light,
+        // so the image depends neither on the order of shading nor on the backend.
+        let mut rng = Pcg32::new(path.seed, li as u64);
         for s in 0..light.samples() {
             let Some((inc, target)) = light.sample(sp.p, s, &mut rng) else { continue };
             let cos = ns.dot(inc.dir);
@@ -203,9 +220,15 @@ pub fn shade(
             }
         }
     }
-    let child = |k: Vec3, media: Media| Path { pixel: path.pixel, depth: path.depth + 1, weight: weight * k, media };
+    let child = |k: Vec3, media: Media, kind: RayKind| Path {
+        pixel: path.pixel,
+        depth: path.depth + 1,
+        weight: weight * k,
+        media,
+        seed: mix(path.seed, kind as u64),
+    };
     if kr != Vec3::ZERO {
-        let c = child(kr, path.media);
+        let c = child(kr, path.media, RayKind::Reflected);
         if c.weight.max_element() < settings.bailout {
             counts.cut_by_weight += 1;
         } else {
@@ -218,7 +241,7 @@ pub fn shade(
         }
     }
     if let (Some(t), true) = (refracted, kt != Vec3::ZERO) {
-        let c = child(kt, inner);
+        let c = child(kt, inner, RayKind::Refracted);
         if c.weight.max_element() < settings.bailout {
             counts.cut_by_weight += 1;
         } else if t.dot(n_face) < 0.0 {
