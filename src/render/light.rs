@@ -78,6 +78,7 @@ impl Light {
     /// Sample `s` (of [`samples`](Self::samples)) of the light seen from `p`: what arrives, and
     /// the point the shadow feeler must reach (`None` for directional light). `rng` jitters area
     /// lights' strata.
+    #[inline]
     pub fn sample(&self, p: Vec3, s: u32, rng: &mut Pcg32) -> Option<(Incident, Option<Vec3>)> {
         let target = match self.kind {
             LightKind::Directional { .. } => return self.incident(p).map(|i| (i, None)),
@@ -105,16 +106,20 @@ impl Light {
     }
 
     /// What a light at `target` (its position, or a sample of its area) sends to `p`.
+    #[inline(always)]
     fn arriving(&self, p: Vec3, target: Vec3) -> Option<Incident> {
         let (dir, dist) = match self.kind {
             LightKind::Directional { direction } => (-direction, f32::INFINITY),
             _ => {
+                // One square root and one division (this runs once per shadow feeler).
                 let v = target - p;
-                let d = v.length();
-                if !(d > 0.0 && d.is_finite()) {
+                let d2 = v.length_squared();
+                if !(d2 > 0.0 && d2.is_finite()) {
                     return None;
                 }
-                (v / d, d)
+                let d = d2.sqrt();
+                let inv = 1.0 / d;
+                (v * inv, d)
             }
         };
         let mut k = 1.0;
@@ -129,7 +134,7 @@ impl Light {
             }
         }
         if let (Some(fade), true) = (self.fade, dist.is_finite()) {
-            k *= 2.0 / (1.0 + (dist / fade).powi(2));
+            k *= 2.0 * fade * fade / (fade * fade + dist * dist);
         }
         Some(Incident { dir, dist, color: self.color * k })
     }

@@ -204,6 +204,10 @@ pub struct Renderer<'a, Q: Query> {
     pub settings: Settings,
 }
 
+thread_local! {
+    static WAVE_BUFFERS: std::cell::RefCell<Wave> = std::cell::RefCell::new(Wave::default());
+}
+
 /// The reusable buffers of one wavefront (one per worker thread).
 #[derive(Default)]
 struct Wave {
@@ -256,8 +260,10 @@ impl<Q: Query> Renderer<'_, Q> {
         let runs: Vec<(Vec<Vec3>, RenderStats)> = pixels
             .par_chunks(per_run)
             .with_max_len(1)
-            .map_init(Wave::default, |wave, run| {
-                let out = self.wavefront(wave, run);
+            .map(|run| {
+                // One set of buffers per worker thread, kept for the next render too
+                // (`map_init` would make one per split of the work: fresh pages each run).
+                let out = WAVE_BUFFERS.with_borrow_mut(|wave| self.wavefront(wave, run));
                 let n = done.fetch_add(run.len() as u64 * s.spp as u64, std::sync::atomic::Ordering::Relaxed);
                 progress(n + run.len() as u64 * s.spp as u64);
                 out
