@@ -65,7 +65,8 @@ struct Args {
     /// 512×512 primary rays and 3 passes; adds `scaling` to the JSON and scaling.png.
     #[arg(long)]
     scaling: bool,
-    /// Render scene files (the positional arguments, default data/{whitted,cornell,beer}.toml) with
+    /// Render scene files (the positional arguments; default data/{whitted,cornell,beer}.toml, and
+    /// data/sibenik_{fisheye,panorama}.toml when the shared scenes are present) with
     /// strahl, with strahl on Embree and with POV-Ray; write render.md, render.json and the
     /// images to --out, then exit.
     #[arg(long)]
@@ -376,7 +377,15 @@ fn write_sphereflake(p: &Path) -> anyhow::Result<()> {
 
 fn render_comparison(args: &Args, pool: &rayon::ThreadPool) -> anyhow::Result<()> {
     let scenes: Vec<PathBuf> = if args.scenes.is_empty() {
-        ["whitted", "cornell", "beer"].iter().map(|n| project_dir("data").join(format!("{n}.toml"))).collect()
+        let mut v: Vec<PathBuf> =
+            ["whitted", "cornell", "beer"].iter().map(|n| project_dir("data").join(format!("{n}.toml"))).collect();
+        // The Sibenik views need the shared scenes (not part of this repository).
+        if project_dir("../shared/scenes/sibenik/sibenik.obj").exists() {
+            v.extend(
+                ["sibenik_fisheye", "sibenik_panorama"].iter().map(|n| project_dir("data").join(format!("{n}.toml"))),
+            );
+        }
+        v
     } else {
         args.scenes.clone()
     };

@@ -113,6 +113,22 @@ pub fn export(file: &SceneFile, objects: &[Vec<TriangleMesh>], settings: &Settin
         v(file.render.ambient)
     )?;
     writeln!(s, "background {{ rgb {} }}", v(file.render.background))?;
+    // POV-Ray's spherical camera turns its rays about its `right` vector with a fixed sense, so
+    // the negated `right` that makes other cameras right-handed turns its image upside down (and
+    // a positive one mirrors it). For the panorama the world is mirrored instead, across the
+    // camera's vertical plane, and the camera left as POV-Ray expects it.
+    let mirror = matches!(rc.projection, Projection::Panorama);
+    let h = if mirror {
+        let r = rc.right;
+        let lin = glam::Mat3::IDENTITY - glam::Mat3::from_cols(r * r.x, r * r.y, r * r.z) * 2.0;
+        glam::Affine3A::from_translation(cam.eye)
+            * glam::Affine3A::from_mat3(lin)
+            * glam::Affine3A::from_translation(-cam.eye)
+    } else {
+        glam::Affine3A::IDENTITY
+    };
+    let (pt, dv) = (|p: Vec3| h.transform_point3(p), |d: Vec3| h.transform_vector3(d));
+    let handed = if mirror { 1.0 } else { -1.0 };
     let (kind, right, up) = match rc.projection {
         Projection::Pinhole { fov_deg } => (format!("perspective angle {fov_deg}"), aspect, 1.0),
         Projection::Orthographic { width } => ("orthographic".into(), width, width / aspect),
@@ -124,7 +140,7 @@ pub fn export(file: &SceneFile, objects: &[Vec<TriangleMesh>], settings: &Settin
         s,
         "camera {{ {kind} location {} right {} up {} sky {} look_at {} }}",
         v(cam.eye),
-        v(Vec3::new(-right, 0.0, 0.0)),
+        v(Vec3::new(handed * right, 0.0, 0.0)),
         v(Vec3::new(0.0, up, 0.0)),
         v(cam.up),
         v(cam.look_at)
@@ -132,26 +148,27 @@ pub fn export(file: &SceneFile, objects: &[Vec<TriangleMesh>], settings: &Settin
     for l in &file.lights {
         let fade = l.fade.map_or(String::new(), |f| format!(" fade_distance {f} fade_power 2"));
         let body = match l.kind {
-            LightKind::Point => format!("{} color rgb {}{fade}", v(l.position), v(l.color)),
+            LightKind::Point => format!("{} color rgb {}{fade}", v(pt(l.position)), v(l.color)),
             LightKind::Directional { direction } => {
                 // A parallel light from far up-stream, pointing along the direction.
+                let direction = dv(direction);
                 let from = -direction * 1e5;
                 format!("{} color rgb {} parallel point_at {}", v(from), v(l.color), v(from + direction))
             }
             LightKind::Spot { direction, cos_inner, cos_outer } => format!(
                 "{} color rgb {} spotlight radius {} falloff {} tightness 0 point_at {}{fade}",
-                v(l.position),
+                v(pt(l.position)),
                 v(l.color),
                 cos_inner.acos().to_degrees(),
                 cos_outer.acos().to_degrees(),
-                v(l.position + direction)
+                v(pt(l.position + direction))
             ),
             LightKind::Rect { u, v: e2, n } => format!(
                 "{} color rgb {} area_light {}, {}, {}, {} jitter adaptive 0{fade}",
-                v(l.position),
+                v(pt(l.position)),
                 v(l.color),
-                v(u),
-                v(e2),
+                v(dv(u)),
+                v(dv(e2)),
                 n[0].max(2),
                 n[1].max(2)
             ),
@@ -159,7 +176,7 @@ pub fn export(file: &SceneFile, objects: &[Vec<TriangleMesh>], settings: &Settin
                 let k = ((n as f32).sqrt().round() as u32).max(2);
                 format!(
                     "{} color rgb {} area_light <{d}, 0, 0>, <0, 0, {d}>, {k}, {k} circular orient jitter adaptive 0{fade}",
-                    v(l.position),
+                    v(pt(l.position)),
                     v(l.color),
                     d = 2.0 * radius
                 )
@@ -176,7 +193,7 @@ pub fn export(file: &SceneFile, objects: &[Vec<TriangleMesh>], settings: &Settin
     }
     for (i, inst) in file.instances.iter().enumerate() {
         let sh = &file.mesh_shading[inst.object];
-        let m = inst.transform;
+        let m = h * inst.transform;
         let (a, b, c, t) = (m.matrix3.x_axis, m.matrix3.y_axis, m.matrix3.z_axis, m.translation);
         let matrix = format!(
             "matrix <{}, {}, {}, {}, {}, {}, {}, {}, {}, {}, {}, {}>",
