@@ -35,6 +35,8 @@ pub enum Error {
     BadTransform { instance: usize },
     #[error("render settings: {0}")]
     RenderSettings(String),
+    #[error("cannot read texture {path}: {message}")]
+    Texture { path: PathBuf, message: String },
     #[error("cannot write image {path}: {message}")]
     ImageWrite { path: PathBuf, message: String },
     #[error("scene has {0} geometries; at most 2^32 - 1 are supported (2^29 with the Badouel test)")]

@@ -134,6 +134,9 @@ pub enum MeshSource {
     Sphereflake { levels: u32, stacks: u32, slices: u32 },
     /// [`procedural::uv_sphere`] at the origin.
     Sphere { radius: f32, stacks: u32, slices: u32 },
+    /// An OBJ file read with its material libraries and texture coordinates (`mtl = true`): one
+    /// geometry per object/group and material.
+    ObjWithMaterials(PathBuf),
     /// [`procedural::cuboid`]: an axis-aligned box, 12 triangles.
     Box { min: Vec3, max: Vec3 },
     /// [`procedural::quad`]: a rectangle in the plane y = 0 facing +y, centred on the origin.
@@ -145,6 +148,7 @@ impl MeshSource {
     pub fn load(&self) -> Result<Vec<TriangleMesh>> {
         Ok(match *self {
             MeshSource::Obj(ref p) => load_obj(p)?,
+            MeshSource::ObjWithMaterials(ref p) => crate::geometry::load_obj_with_materials(p)?.meshes,
             MeshSource::Sphereflake { levels, stacks, slices } => {
                 vec![procedural::sphereflake(levels, stacks, slices)]
             }
@@ -225,8 +229,15 @@ impl SceneFile {
                     "mesh `{name}`: {tris:.3e} triangles; at most {MAX_GENERATED_TRIANGLES} (2^26) per generated mesh"
                 ))
             };
+            if m.mtl.is_some() && m.obj.is_none() {
+                return Err(err(format!("mesh `{name}`: `mtl` applies to `obj` meshes only")));
+            }
             let source = if let Some(p) = &m.obj {
-                MeshSource::Obj(base.join(p))
+                if m.mtl == Some(true) {
+                    MeshSource::ObjWithMaterials(base.join(p))
+                } else {
+                    MeshSource::Obj(base.join(p))
+                }
             } else if let Some(s) = &m.sphereflake {
                 // 1 + 9 + … + 9^levels spheres.
                 let spheres = (9f64.powi(s.levels.min(1000) as i32 + 1) - 1.0) / 8.0;
@@ -459,21 +470,80 @@ impl SceneFile {
     /// returned: materials per mesh and instance, normals, lights and environment.
     pub fn world(&self, objects: &[Vec<TriangleMesh>]) -> Result<World> {
         let err = |message: String| Error::SceneFile { path: self.path.clone(), message };
-        let mut objs: Vec<Vec<(&TriangleMesh, u32, bool)>> = Vec::with_capacity(objects.len());
-        for ((meshes, sh), (name, _)) in objects.iter().zip(&self.mesh_shading).zip(&self.meshes) {
+        let mut materials: Vec<Material> = self.materials.iter().map(|(_, m)| *m).collect();
+        let mut textures = Vec::new();
+        let mut texture_paths: Vec<PathBuf> = Vec::new();
+        // Per object and geometry: material and corner texture coordinates.
+        let mut per_geom: Vec<Vec<GeomShading>> = Vec::with_capacity(objects.len());
+        for ((meshes, sh), (name, source)) in objects.iter().zip(&self.mesh_shading).zip(&self.meshes) {
             for (group, _) in &sh.groups {
                 if !meshes.iter().any(|g| &g.name == group) {
                     let names: Vec<&str> = meshes.iter().map(|g| g.name.as_str()).collect();
                     return Err(err(format!("mesh `{name}` has no object or group `{group}` (it has {names:?})")));
                 }
             }
-            let material = |g: &TriangleMesh| sh.groups.iter().find(|(n, _)| *n == g.name).map_or(sh.material, |x| x.1);
-            objs.push(meshes.iter().map(|g| (g, material(g), sh.smooth)).collect());
+            let group = |g: &TriangleMesh| sh.groups.iter().find(|(n, _)| *n == g.name).map(|x| x.1);
+            let mut geoms: Vec<GeomShading> = meshes.iter().map(|g| (group(g).unwrap_or(sh.material), None)).collect();
+            if let MeshSource::ObjWithMaterials(path) = source {
+                // Read again for the materials and coordinates; the same parse gives the same
+                // geometries as the ones the scene was built from.
+                let obj = crate::geometry::load_obj_with_materials(path)?;
+                let same = obj.meshes.len() == meshes.len()
+                    && obj.meshes.iter().zip(meshes).all(|(a, b)| a.triangle_count() == b.triangle_count());
+                if !same {
+                    return Err(err(format!("mesh `{name}`: {} changed while it was read", path.display())));
+                }
+                let first = materials.len() as u32;
+                let base = path.parent().unwrap_or(Path::new("."));
+                for m in &obj.materials {
+                    let texture = match &m.diffuse_texture {
+                        None => None,
+                        Some(t) => {
+                            let p = base.join(t.trim());
+                            let i = match texture_paths.iter().position(|q| *q == p) {
+                                Some(i) => i,
+                                None => {
+                                    textures.push(crate::render::texture::ImageTexture::load(&p)?);
+                                    texture_paths.push(p);
+                                    textures.len() - 1
+                                }
+                            };
+                            Some(i as u32)
+                        }
+                    };
+                    let mat = material_from_mtl(m, texture)
+                        .map_err(|e| err(format!("mesh `{name}`: MTL material `{}`: {e}", m.name)))?;
+                    materials.push(mat);
+                }
+                for (k, g) in meshes.iter().enumerate() {
+                    if let (None, Some(m)) = (group(g), obj.mesh_material[k]) {
+                        geoms[k].0 = first + m as u32;
+                    }
+                    geoms[k].1 =
+                        obj.corner_uvs[k].as_ref().map(|c| c.iter().map(|t| t.map(glam::Vec2::from)).collect());
+                }
+            }
+            per_geom.push(geoms);
         }
+        let objs: Vec<Vec<(&TriangleMesh, u32, bool)>> = objects
+            .iter()
+            .zip(&per_geom)
+            .zip(&self.mesh_shading)
+            .map(|((meshes, geoms), sh)| meshes.iter().zip(geoms).map(|(g, (m, _))| (g, *m, sh.smooth)).collect())
+            .collect();
         let placed: Vec<_> = self.instances.iter().copied().zip(self.instance_materials.iter().copied()).collect();
+        let mut surfaces = Surfaces::new(&objs, &placed);
+        for (o, geoms) in per_geom.into_iter().enumerate() {
+            for (g, (_, uvs)) in geoms.into_iter().enumerate() {
+                if let Some(uvs) = uvs {
+                    surfaces.set_uvs(o, g, uvs);
+                }
+            }
+        }
         let world = World {
-            surfaces: Surfaces::new(&objs, &placed),
-            materials: self.materials.iter().map(|(_, m)| *m).collect(),
+            surfaces,
+            materials,
+            textures,
             lights: self.lights.clone(),
             ambient: self.render.ambient,
             background: self.render.background,
@@ -481,6 +551,48 @@ impl SceneFile {
         world.check().map_err(|e| err(e.to_string()))?;
         Ok(world)
     }
+}
+
+/// A geometry's material and the texture coordinates of its triangles' corners.
+type GeomShading = (u32, Option<Vec<[glam::Vec2; 3]>>);
+
+/// An MTL material as the renderer's: `Kd` (1 under a `map_Kd`, else 0.7 when absent), `Ka` as
+/// the ambient factor, `Ks`/`Ns` Phong, `Ni` the index, `d` (or `Tr`) and `Tf` the transmission,
+/// and the illumination model: 3 and 5 reflect by `Ks`, 4, 6 and 7 refract (glass).
+fn material_from_mtl(m: &tobj::Material, texture: Option<u32>) -> std::result::Result<Material, String> {
+    let d = Material::default();
+    let rgb = |c: Option<[f32; 3]>| c.map(Vec3::from);
+    let param = |k: &str| {
+        m.unknown_param.get(k).and_then(|v| {
+            let n: Vec<f32> = v.split_whitespace().filter_map(|x| x.parse().ok()).collect();
+            match n[..] {
+                [g] => Some(Vec3::splat(g)),
+                [r, g, b, ..] => Some(Vec3::new(r, g, b)),
+                _ => None,
+            }
+        })
+    };
+    let dissolve = m.dissolve.or_else(|| param("Tr").map(|t| 1.0 - t.x)).unwrap_or(1.0);
+    let illum = m.illumination_model.unwrap_or(2);
+    let specular = if illum >= 2 { rgb(m.specular).unwrap_or(Vec3::ZERO) } else { Vec3::ZERO };
+    let filter = param("Tf").unwrap_or(Vec3::ONE);
+    let glass = matches!(illum, 4 | 6 | 7);
+    let transmit =
+        if dissolve < 1.0 || glass { filter * (1.0 - dissolve).max(if glass { 1.0 } else { 0.0 }) } else { Vec3::ZERO };
+    let mat = Material {
+        ambient: rgb(m.ambient).unwrap_or(d.ambient),
+        diffuse: rgb(m.diffuse).unwrap_or(if texture.is_some() { Vec3::ONE } else { d.diffuse }),
+        specular,
+        shininess: m.shininess.unwrap_or(d.shininess),
+        reflect: if matches!(illum, 3 | 5) { specular } else { Vec3::ZERO },
+        transmit,
+        ior: m.optical_density.unwrap_or(if transmit != Vec3::ZERO { 1.5 } else { 1.0 }),
+        absorption: Vec3::ZERO,
+        fresnel: FresnelMode::Exact,
+        texture: texture.map(|index| Texture::Image { index }),
+    };
+    mat.check()?;
+    Ok(mat)
 }
 
 /// Translation · rotation (degrees about x, then y, then z) · scale.
@@ -692,6 +804,7 @@ struct RawMesh {
     smooth: Option<bool>,
     #[serde(default)]
     groups: BTreeMap<String, String>,
+    mtl: Option<bool>,
 }
 
 #[derive(Deserialize)]

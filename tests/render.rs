@@ -358,3 +358,68 @@ mesh = "block"
     // The corner pixel sees the whole rectangle: about as lit as under the point light.
     assert!((soft[0] - lit).abs() < 0.05 * lit, "{} vs {lit}", soft[0]);
 }
+
+#[test]
+fn obj_materials_and_textures() {
+    let dir = std::env::temp_dir().join(format!("strahl-mtl-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    // A 2×2 texture: red, green / blue, white.
+    let texels = vec![255, 0, 0, 0, 255, 0, 0, 0, 255, 255, 255, 255];
+    image::RgbImage::from_raw(2, 2, texels).unwrap().save(dir.join("tex.png")).unwrap();
+    std::fs::write(
+        dir.join("m.mtl"),
+        "newmtl painted\nKa 1 1 1\nKd 1 1 1\nillum 1\nmap_Kd tex.png\n\nnewmtl shiny\nKd 0.2 0.2 0.2\nKs 0.5 0.5 0.5\nNs 40\nillum 3\n\nnewmtl glass\nKd 0 0 0\nNi 1.33\nd 0.1\nTf 1 0.5 0.5\nillum 7\n",
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("q.obj"),
+        "mtllib m.mtl\nv -1 0 -1\nv 1 0 -1\nv 1 0 1\nv -1 0 1\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n\
+         o floor\nusemtl painted\nf 1/1 4/4 3/3 2/2\nusemtl shiny\nf 1 2 3\no pane\nusemtl glass\nf 1 2 3\n",
+    )
+    .unwrap();
+    let text = r#"
+[camera]
+projection = "orthographic"
+width = 2.0
+eye = [0.0, 5.0, 0.0]
+look_at = [0.0, 0.0, 0.0]
+up = [0.0, 0.0, 1.0]
+[mesh.q]
+obj = "q.obj"
+mtl = true
+[[instance]]
+mesh = "q"
+"#;
+    let file = SceneFile::parse(text, &dir.join("s.toml")).unwrap();
+    let objects = file.load_objects().unwrap();
+    // Split where the material changes: painted floor, shiny floor, glass pane.
+    assert_eq!(objects[0].iter().map(|m| m.triangle_count()).collect::<Vec<_>>(), [2, 1, 1]);
+    let world = file.world(&objects).unwrap();
+    let m = &world.materials;
+    assert_eq!(m.len(), 1 + 3);
+    assert_eq!(m[2].reflect, Vec3::splat(0.5));
+    assert!((m[3].ior - 1.33).abs() < 1e-6 && m[3].transmit == Vec3::new(1.0, 0.5, 0.5));
+    // Only the painted floor is visible from above if the others are removed: render the
+    // painted part alone by an OBJ without them.
+    std::fs::write(dir.join("q.obj"), "mtllib m.mtl\nv -1 0 -1\nv 1 0 -1\nv 1 0 1\nv -1 0 1\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nusemtl painted\nf 1/1 4/4 3/3 2/2\n").unwrap();
+    let file = SceneFile::parse(text, &dir.join("s.toml")).unwrap();
+    let objects = file.load_objects().unwrap();
+    let world = file.world(&objects).unwrap();
+    let scene = InstancedScene::build(objects, file.instances.clone(), &BuildConfig::default()).unwrap();
+    let settings = Settings { width: 2, height: 2, ..Settings::default() };
+    let (img, _) = renderer(&file, &scene, &world, settings).render(&|_| {}).unwrap();
+    // Pixel centres fall on texel centres: each pixel is one texel's colour (ambient 1 × Ka 1).
+    let mut got: Vec<[u32; 3]> = img.pixels.iter().map(|p| p.to_array().map(|c| (c * 1000.0).round() as u32)).collect();
+    got.sort();
+    assert_eq!(got, [[0, 0, 1000], [0, 1000, 0], [1000, 0, 0], [1000, 1000, 1000]]);
+    // Missing library, missing texture: typed errors naming the file.
+    std::fs::write(dir.join("q.obj"), "mtllib gone.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+    let e = SceneFile::parse(text, &dir.join("s.toml")).unwrap().load_objects().unwrap_err();
+    assert!(e.to_string().contains("gone.mtl"), "{e}");
+    std::fs::write(dir.join("m.mtl"), "newmtl painted\nmap_Kd nothere.png\n").unwrap();
+    std::fs::write(dir.join("q.obj"), "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl painted\nf 1 2 3\n").unwrap();
+    let file = SceneFile::parse(text, &dir.join("s.toml")).unwrap();
+    let e = file.world(&file.load_objects().unwrap()).unwrap_err();
+    assert!(e.to_string().contains("nothere.png"), "{e}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

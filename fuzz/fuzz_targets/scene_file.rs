@@ -15,7 +15,7 @@ fuzz_target!(|data: &[u8]| {
     // Keep each execution small: the limits themselves are tested by their own errors.
     let small = file.instances.len() <= 256
         && file.meshes.iter().all(|(_, s)| match *s {
-            MeshSource::Obj(_) | MeshSource::Box { .. } | MeshSource::Quad { .. } => true,
+            MeshSource::Obj(_) | MeshSource::ObjWithMaterials(_) | MeshSource::Box { .. } | MeshSource::Quad { .. } => true,
             MeshSource::Sphereflake { levels, stacks, slices } => levels <= 1 && stacks <= 16 && slices <= 16,
             MeshSource::Sphere { stacks, slices, .. } => stacks <= 64 && slices <= 64,
         });

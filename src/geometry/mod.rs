@@ -9,5 +9,5 @@ pub mod triangle;
 pub(crate) mod watertight;
 
 pub use mesh::{MAX_COORDINATE, TriangleMesh};
-pub use obj::{load_obj, parse_obj};
+pub use obj::{ObjWithMaterials, load_obj, load_obj_with_materials, parse_obj};
 pub use triangle::{TriangleTest, exact_hit, intersect_triangle};

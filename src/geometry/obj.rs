@@ -1,5 +1,6 @@
 //! Wavefront OBJ loading through `tobj`: polygons fan-triangulated, one geometry per OBJ object or
-//! group, materials ignored.
+//! group; materials ignored by [`load_obj`], read (with texture coordinates) by
+//! [`load_obj_with_materials`] for the renderer.
 
 use std::io::Read;
 use std::path::Path;
@@ -36,6 +37,70 @@ pub fn parse_obj(bytes: &[u8], path: &Path) -> Result<Vec<TriangleMesh>> {
     // Material libraries are not needed for ray queries: the loader refuses them unread.
     let (models, _materials) = tobj::load_obj_buf(&mut &bytes[..], &opts, |_| Err(tobj::LoadError::OpenFileFailed))
         .map_err(|cause| Error::Obj { path: path.to_owned(), cause })?;
+    Ok(meshes_of(models)?.into_iter().map(|(m, _)| m).collect())
+}
+
+/// An OBJ file loaded with its material library (see [`load_obj_with_materials`]).
+#[derive(Clone, Debug)]
+pub struct ObjWithMaterials {
+    /// One mesh per object/group and material, in file order.
+    pub meshes: Vec<TriangleMesh>,
+    /// Per mesh: its material (an index into `materials`), if it has one.
+    pub mesh_material: Vec<Option<usize>>,
+    /// Per mesh: the texture coordinates of each triangle's three corners, if its faces give them.
+    pub corner_uvs: Vec<Option<Vec<[[f32; 2]; 3]>>>,
+    /// The materials of every `mtllib` the file names.
+    pub materials: Vec<tobj::Material>,
+}
+
+/// Largest material library read, in bytes.
+pub const MAX_MTL_BYTES: u64 = 64 << 20;
+
+/// Like [`load_obj`], but the material libraries (`mtllib`, relative to the OBJ file's folder,
+/// regular files up to [`MAX_MTL_BYTES`]) are read, each object/group is split where its
+/// material changes (as tobj does), and texture coordinates are kept. A missing or unreadable
+/// library is an [`Error::Io`] naming it; a malformed one an [`Error::Obj`].
+pub fn load_obj_with_materials(path: impl AsRef<Path>) -> Result<ObjWithMaterials> {
+    let path = path.as_ref();
+    let bytes = read_regular(path, MAX_OBJ_BYTES)?;
+    check_records(path, &bytes)?;
+    let opts = tobj::LoadOptions { triangulate: true, single_index: false, ignore_points: true, ignore_lines: true };
+    let base = path.parent().unwrap_or(Path::new("."));
+    let failed = std::cell::RefCell::new(None);
+    let loaded = tobj::load_obj_buf(&mut &bytes[..], &opts, |mtl| {
+        let p = base.join(mtl);
+        match read_regular(&p, MAX_MTL_BYTES) {
+            Ok(b) => tobj::load_mtl_buf(&mut &b[..]),
+            Err(e) => {
+                *failed.borrow_mut() = Some(e);
+                Err(tobj::LoadError::OpenFileFailed)
+            }
+        }
+    });
+    if let Some(e) = failed.into_inner() {
+        return Err(e);
+    }
+    let (models, materials) = loaded.map_err(|cause| Error::Obj { path: path.to_owned(), cause })?;
+    let materials = materials.map_err(|cause| Error::Obj { path: path.to_owned(), cause })?;
+    let mut out = ObjWithMaterials { meshes: Vec::new(), mesh_material: Vec::new(), corner_uvs: Vec::new(), materials };
+    for (mesh, raw) in meshes_of(models)? {
+        let uvs = (raw.texcoord_indices.len() == raw.indices.len() && !raw.texcoords.is_empty()).then(|| {
+            let uv = |i: u32| {
+                let i = i as usize * 2;
+                raw.texcoords.get(i..i + 2).map_or([0.0, 0.0], |t| [t[0], t[1]])
+            };
+            raw.texcoord_indices.chunks_exact(3).map(|c| [uv(c[0]), uv(c[1]), uv(c[2])]).collect()
+        });
+        let material = raw.material_id.filter(|&m| m < out.materials.len());
+        out.meshes.push(mesh);
+        out.mesh_material.push(material);
+        out.corner_uvs.push(uvs);
+    }
+    Ok(out)
+}
+
+/// The meshes of tobj's models with faces, each with tobj's mesh (for its other attributes).
+fn meshes_of(models: Vec<tobj::Model>) -> Result<Vec<(TriangleMesh, tobj::Mesh)>> {
     let mut meshes = Vec::with_capacity(models.len());
     for model in models {
         let m = model.mesh;
@@ -50,7 +115,7 @@ pub fn parse_obj(bytes: &[u8], path: &Path) -> Result<Vec<TriangleMesh>> {
             return Err(Error::RaggedIndices { len: m.indices.len() });
         }
         let indices = m.indices.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
-        meshes.push(TriangleMesh::new(model.name, positions, indices)?);
+        meshes.push((TriangleMesh::new(model.name, positions, indices)?, m));
     }
     Ok(meshes)
 }

@@ -2,7 +2,9 @@
 //! model, mirror reflection, Snell refraction with total internal reflection, the exact dielectric
 //! Fresnel terms and Schlick's approximation, and Beer–Lambert absorption.
 
-use glam::Vec3;
+use glam::{Vec2, Vec3};
+
+use super::texture::ImageTexture;
 
 /// How a transparent material splits light between its reflected and refracted rays.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -16,11 +18,14 @@ pub enum FresnelMode {
     Schlick,
 }
 
-/// A procedural texture for the diffuse colour.
+/// A texture for the diffuse colour.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Texture {
     /// Solid 3-D checkerboard of cubes `size` wide: the material's diffuse colour and `other`.
     Checker { other: Vec3, size: f32 },
+    /// Image `index` of the world's textures, at the surface's texture coordinates, times the
+    /// diffuse colour (OBJ `map_Kd` times `Kd`); surfaces without coordinates get the colour.
+    Image { index: u32 },
 }
 
 /// A material: Phong's local model plus the recursion's reflection and transmission.
@@ -74,10 +79,14 @@ impl Material {
         self.reflect.max_element() > 0.0 || (self.is_transparent() && self.fresnel != FresnelMode::Off)
     }
 
-    /// The diffuse colour at world point `p`.
-    pub fn diffuse_at(&self, p: Vec3) -> Vec3 {
+    /// The diffuse colour at world point `p` with texture coordinates `uv`.
+    pub fn diffuse_at(&self, p: Vec3, uv: Option<Vec2>, textures: &[ImageTexture]) -> Vec3 {
         match self.texture {
             None => self.diffuse,
+            Some(Texture::Image { index }) => match (uv, textures.get(index as usize)) {
+                (Some(uv), Some(t)) => self.diffuse * t.sample(uv),
+                _ => self.diffuse,
+            },
             Some(Texture::Checker { other, size }) => {
                 // Nudged like POV-Ray's checker, so that a floor at y = 0 does not flicker.
                 let c = (p / size + 1e-4).floor();
@@ -244,9 +253,9 @@ mod tests {
     #[test]
     fn checker_alternates() {
         let m = Material { texture: Some(Texture::Checker { other: Vec3::ZERO, size: 1.0 }), ..Default::default() };
-        assert_eq!(m.diffuse_at(Vec3::new(0.5, 0.5, 0.5)), m.diffuse);
-        assert_eq!(m.diffuse_at(Vec3::new(1.5, 0.5, 0.5)), Vec3::ZERO);
-        assert_eq!(m.diffuse_at(Vec3::new(-0.5, 0.5, 0.5)), Vec3::ZERO);
+        assert_eq!(m.diffuse_at(Vec3::new(0.5, 0.5, 0.5), None, &[]), m.diffuse);
+        assert_eq!(m.diffuse_at(Vec3::new(1.5, 0.5, 0.5), None, &[]), Vec3::ZERO);
+        assert_eq!(m.diffuse_at(Vec3::new(-0.5, 0.5, 0.5), None, &[]), Vec3::ZERO);
     }
 
     #[test]

@@ -19,6 +19,7 @@ pub mod light;
 pub mod material;
 pub mod shade;
 pub mod surface;
+pub mod texture;
 pub mod tree;
 
 use std::time::Instant;
@@ -95,6 +96,8 @@ impl Settings {
 pub struct World {
     pub surfaces: Surfaces,
     pub materials: Vec<Material>,
+    /// Image textures, named by [`Texture::Image`] materials.
+    pub textures: Vec<texture::ImageTexture>,
     pub lights: Vec<Light>,
     /// Ambient light, times each material's `ambient · diffuse`.
     pub ambient: Vec3,
@@ -112,6 +115,11 @@ impl World {
         }
         for (i, m) in self.materials.iter().enumerate() {
             m.check().or_else(|e| bad(format!("material {i}: {e}")))?;
+            if let Some(Texture::Image { index }) = m.texture
+                && index as usize >= self.textures.len()
+            {
+                return bad(format!("material {i} names texture {index}, but there are {}", self.textures.len()));
+            }
         }
         for (i, l) in self.lights.iter().enumerate() {
             l.check().or_else(|e| bad(format!("light {i}: {e}")))?;

@@ -143,7 +143,7 @@ pub fn shade(
     if ns.dot(-d) <= 0.0 {
         ns = n_face;
     }
-    let kd = mat.diffuse_at(sp.p);
+    let kd = mat.diffuse_at(sp.p, sp.uv, &world.textures);
 
     // Ambient.
     let ambient = weight * mat.ambient * kd * world.ambient;

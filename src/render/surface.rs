@@ -3,7 +3,7 @@
 //! instances as the query backend, so any backend's [`Hit`] (strahl's or Embree's: the same ids
 //! and barycentric convention) can be shaded.
 
-use glam::{Affine3A, Mat3, Vec3};
+use glam::{Affine3A, Mat3, Vec2, Vec3};
 
 use crate::geometry::TriangleMesh;
 use crate::instance::Instance;
@@ -16,6 +16,8 @@ struct Geometry {
     indices: Vec<[u32; 3]>,
     /// Per-vertex unit normals for smooth shading, or `None` for flat shading.
     normals: Option<Vec<Vec3>>,
+    /// Texture coordinates of each triangle's corners.
+    uvs: Option<Vec<[Vec2; 3]>>,
     material: u32,
 }
 
@@ -44,6 +46,8 @@ pub struct SurfacePoint {
     pub ng: Vec3,
     /// Unit shading normal on the same side as `ng`.
     pub ns: Vec3,
+    /// Texture coordinates, where the mesh has them.
+    pub uv: Option<Vec2>,
     pub material: u32,
 }
 
@@ -78,6 +82,7 @@ impl Surfaces {
                         positions: m.positions().to_vec(),
                         indices: m.indices().to_vec(),
                         normals: smooth.then(|| vertex_normals(m)),
+                        uvs: None,
                         material,
                     })
                     .collect()
@@ -93,6 +98,18 @@ impl Surfaces {
             })
             .collect();
         Self { objects, placements }
+    }
+
+    /// Gives geometry `geom` of object `object` texture coordinates per triangle corner; `false`
+    /// (and nothing set) if there is no such geometry or the count is not its triangle count.
+    pub fn set_uvs(&mut self, object: usize, geom: usize, uvs: Vec<[Vec2; 3]>) -> bool {
+        match self.objects.get_mut(object).and_then(|o| o.get_mut(geom)) {
+            Some(g) if g.indices.len() == uvs.len() => {
+                g.uvs = Some(uvs);
+                true
+            }
+            _ => false,
+        }
     }
 
     /// Materials referenced, for checking against the material table.
@@ -143,7 +160,11 @@ impl Surfaces {
         if !p.is_finite() {
             p = ray.at(hit.t);
         }
-        Some(SurfacePoint { p, ng, ns, material })
+        let uv = g.uvs.as_ref().map(|t| {
+            let [a, b, c] = t[hit.prim_id as usize];
+            a * w + b * hit.u + c * hit.v
+        });
+        Some(SurfacePoint { p, ng, ns, uv, material })
     }
 }
 
