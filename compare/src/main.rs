@@ -66,7 +66,8 @@ struct Args {
     #[arg(long)]
     scaling: bool,
     /// Render scene files (the positional arguments; default data/{whitted,cornell,beer}.toml, and
-    /// data/sibenik_{fisheye,panorama}.toml when the shared scenes are present) with
+    /// data/sibenik_{fisheye,panorama}.toml and data/sponza_still_life.toml when the shared scenes
+    /// are present) with
     /// strahl, with strahl on Embree and with POV-Ray; write render.md, render.json and the
     /// images to --out, then exit.
     #[arg(long)]
@@ -384,6 +385,9 @@ fn render_comparison(args: &Args, pool: &rayon::ThreadPool) -> anyhow::Result<()
             v.extend(
                 ["sibenik_fisheye", "sibenik_panorama"].iter().map(|n| project_dir("data").join(format!("{n}.toml"))),
             );
+        }
+        if project_dir("../shared/scenes/sponza_dabrovic/sponza.obj").exists() {
+            v.push(project_dir("data").join("sponza_still_life.toml"));
         }
         v
     } else {
