@@ -57,6 +57,9 @@ fn povray_renders_a_close_image() {
     if Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/scenes/sibenik/sibenik.obj").exists() {
         scenes.extend([("sibenik_fisheye", 40.0, 0.99), ("sibenik_panorama", 40.0, 0.99)]);
     }
+    if Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/scenes/sponza_dabrovic/sponza.obj").exists() {
+        scenes.push(("sponza_still_life", 17.0, 0.75));
+    }
     for (name, min_db, min_close) in scenes {
         let file = SceneFile::read(scene(name)).unwrap();
         let objects = file.load_objects().unwrap();
