@@ -94,6 +94,16 @@ impl Mode {
     }
 }
 
+/// An affine transform as Embree's `RTC_FORMAT_FLOAT3X4_COLUMN_MAJOR`: the three columns of the
+/// linear part, then the translation.
+pub fn column_major(m: &glam::Affine3A) -> [f32; 12] {
+    let mut c = [0.0f32; 12];
+    for (k, col) in [m.matrix3.x_axis, m.matrix3.y_axis, m.matrix3.z_axis, m.translation].iter().enumerate() {
+        c[3 * k..3 * k + 3].copy_from_slice(&col.to_array());
+    }
+    c
+}
+
 /// Quartiles of a set of values: `[q1, median, q3]` (NaN if empty).
 pub fn quartiles(v: &[f64]) -> [f64; 3] {
     let mut s: Vec<f64> = v.iter().copied().filter(|x| !x.is_nan()).collect();
@@ -608,18 +618,7 @@ fn run_instanced(
     let objects = file.load_objects()?;
     progress("building");
     let cfg = BuildConfig::default();
-    let xfms: Vec<(usize, [f32; 12])> = file
-        .instances
-        .iter()
-        .map(|i| {
-            let m = i.transform;
-            let mut c = [0.0f32; 12];
-            for (k, col) in [m.matrix3.x_axis, m.matrix3.y_axis, m.matrix3.z_axis, m.translation].iter().enumerate() {
-                c[3 * k..3 * k + 3].copy_from_slice(&col.to_array());
-            }
-            (i.object, c)
-        })
-        .collect();
+    let xfms: Vec<(usize, [f32; 12])> = file.instances.iter().map(|i| (i.object, column_major(&i.transform))).collect();
     let (mut scene, mut escene) = (None, None);
     let [strahl_ms, embree_ms] = build_rounds(
         settings.build_repeats,

@@ -194,11 +194,8 @@ pub fn export(file: &SceneFile, objects: &[Vec<TriangleMesh>], settings: &Settin
     for (i, inst) in file.instances.iter().enumerate() {
         let sh = &file.mesh_shading[inst.object];
         let m = h * inst.transform;
-        let (a, b, c, t) = (m.matrix3.x_axis, m.matrix3.y_axis, m.matrix3.z_axis, m.translation);
-        let matrix = format!(
-            "matrix <{}, {}, {}, {}, {}, {}, {}, {}, {}, {}, {}, {}>",
-            a.x, a.y, a.z, b.x, b.y, b.z, c.x, c.y, c.z, t.x, t.y, t.z
-        );
+        // POV-Ray's `matrix` takes the same twelve numbers as Embree's column-major 3×4.
+        let matrix = format!("matrix <{}>", crate::harness::column_major(&m).map(|x| x.to_string()).join(", "));
         for (g, mesh) in objects[inst.object].iter().enumerate() {
             if mesh.triangle_count() == 0 {
                 continue;

@@ -20,7 +20,7 @@ use strahl::{
 };
 
 use crate::embree::{self, Device, RTC_INVALID_GEOMETRY_ID, RTCRay, RTCRayHit};
-use crate::harness::{embree_ray_of, empty_hit};
+use crate::harness::{column_major, embree_ray_of, empty_hit, quartiles};
 use crate::kernel::{empty_packet, set_lane};
 
 /// A two-level Embree scene answering strahl's [`Query`].
@@ -37,6 +37,19 @@ thread_local! {
     static RAY_BUF: RefCell<Vec<RTCRay>> = const { RefCell::new(Vec::new()) };
 }
 
+/// Embree's packet of the active lanes of `rays` (under strahl's bad-ray rules) and its valid mask.
+fn packet(rays: &RayPacket) -> (embree::RTCRayHit16, [i32; 16]) {
+    let mut p = empty_packet();
+    let mut valid = [0i32; 16];
+    for l in 0..16 {
+        if rays.is_active(l) {
+            set_lane(&mut p, l, &embree_ray_of(&rays.get(l), l as u32));
+            valid[l] = -1;
+        }
+    }
+    (p, valid)
+}
+
 fn cofactor(m: &Affine3A) -> Mat3 {
     let l = Mat3::from(m.matrix3);
     l.inverse().transpose() * l.determinant()
@@ -46,18 +59,7 @@ impl EmbreeBackend {
     /// Builds `objects` placed by `instances` with Embree's default (medium) quality.
     pub fn build(objects: &[Vec<TriangleMesh>], instances: &[Instance]) -> anyhow::Result<Self> {
         let device = Device::new("threads=2")?;
-        let xfms: Vec<(usize, [f32; 12])> = instances
-            .iter()
-            .map(|i| {
-                let m = i.transform;
-                let mut c = [0.0f32; 12];
-                for (k, col) in [m.matrix3.x_axis, m.matrix3.y_axis, m.matrix3.z_axis, m.translation].iter().enumerate()
-                {
-                    c[3 * k..3 * k + 3].copy_from_slice(&col.to_array());
-                }
-                (i.object, c)
-            })
-            .collect();
+        let xfms: Vec<(usize, [f32; 12])> = instances.iter().map(|i| (i.object, column_major(&i.transform))).collect();
         let scene = embree::Scene::build_instanced(&device, objects, &xfms, embree::Quality::Medium)?;
         let cofactor = instances.iter().map(|i| cofactor(&i.transform)).collect();
         Ok(Self { scene, cofactor, _device: device })
@@ -93,14 +95,7 @@ impl Query for EmbreeBackend {
     }
 
     fn intersect_packet_each(&self, rays: &RayPacket, mut f: impl FnMut(usize, &Hit)) {
-        let mut p = empty_packet();
-        let mut valid = [0i32; 16];
-        for l in 0..16 {
-            if rays.is_active(l) {
-                set_lane(&mut p, l, &embree_ray_of(&rays.get(l), l as u32));
-                valid[l] = -1;
-            }
-        }
+        let (mut p, valid) = packet(rays);
         self.scene.intersect16(&valid, &mut p, false);
         for l in (0..16).filter(|&l| valid[l] != 0) {
             let h = &p.hit;
@@ -124,14 +119,7 @@ impl Query for EmbreeBackend {
     }
 
     fn occluded_packet(&self, rays: &RayPacket) -> u32 {
-        let mut p = empty_packet();
-        let mut valid = [0i32; 16];
-        for l in 0..16 {
-            if rays.is_active(l) {
-                set_lane(&mut p, l, &embree_ray_of(&rays.get(l), l as u32));
-                valid[l] = -1;
-            }
-        }
+        let (mut p, valid) = packet(rays);
         self.scene.occluded16(&valid, &mut p.ray, false);
         (0..16).filter(|&l| valid[l] != 0 && p.ray.tfar[l] == f32::NEG_INFINITY).fold(0, |m, l| m | 1 << l)
     }
@@ -273,15 +261,8 @@ pub struct RenderRow {
     pub bailout_max_diff: u8,
 }
 
-fn median(v: &mut [f64]) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
-
-fn quartiles(v: &mut [f64]) -> [f64; 3] {
-    v.sort_by(f64::total_cmp);
-    let q = |f: f64| v[((v.len() - 1) as f64 * f).round() as usize];
-    [q(0.25), q(0.5), q(0.75)]
+fn median(v: &[f64]) -> f64 {
+    quartiles(v)[1]
 }
 
 /// Largest per-channel difference of two 8-bit images, and how many pixels differ by more than `tol`.
@@ -385,7 +366,7 @@ pub fn compare_scene(
             let (_, far) = diff8(&s8, &p8, 8);
             povray_close = Some(1.0 - far as f64 / (s8.len() / 3) as f64);
         }
-        povray_s = Some(median(&mut times));
+        povray_s = Some(median(&times));
     }
     Ok(RenderRow {
         scene: name,
@@ -395,13 +376,13 @@ pub fn compare_scene(
         max_depth: settings.max_depth,
         triangles,
         rays: stats.rays,
-        strahl_s: median(&mut ts),
-        embree_s: median(&mut te),
-        ratio_quartiles: quartiles(&mut ratios),
-        strahl_query_share: median(&mut qs),
-        embree_query_share: median(&mut qe),
+        strahl_s: median(&ts),
+        embree_s: median(&te),
+        ratio_quartiles: quartiles(&ratios),
+        strahl_query_share: median(&qs),
+        embree_query_share: median(&qe),
         embree_pixels_differing,
-        strahl_job_s: median(&mut jobs),
+        strahl_job_s: median(&jobs),
         povray_s,
         povray_psnr_db,
         povray_close,
