@@ -66,7 +66,7 @@ struct Args {
     #[arg(long)]
     scaling: bool,
     /// Render scene files (the positional arguments; default data/{whitted,cornell,beer}.toml, and
-    /// data/sibenik_{fisheye,panorama}.toml and data/sponza_still_life.toml when the shared scenes
+    /// data/sibenik_{fisheye,omnimax,panorama}.toml and data/sponza_still_life.toml when the shared scenes
     /// are present) with
     /// strahl, with strahl on Embree and with POV-Ray; write render.md, render.json and the
     /// images to --out, then exit.
@@ -383,7 +383,9 @@ fn render_comparison(args: &Args, pool: &rayon::ThreadPool) -> anyhow::Result<()
         // The Sibenik views need the shared scenes (not part of this repository).
         if project_dir("../shared/scenes/sibenik/sibenik.obj").exists() {
             v.extend(
-                ["sibenik_fisheye", "sibenik_panorama"].iter().map(|n| project_dir("data").join(format!("{n}.toml"))),
+                ["sibenik_fisheye", "sibenik_omnimax", "sibenik_panorama"]
+                    .iter()
+                    .map(|n| project_dir("data").join(format!("{n}.toml"))),
             );
         }
         if project_dir("../shared/scenes/sponza_dabrovic/sponza.obj").exists() {
