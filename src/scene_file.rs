@@ -430,6 +430,13 @@ impl SceneFile {
                         max_depth: r.max_depth.unwrap_or(d.settings.max_depth),
                         bailout: r.bailout.unwrap_or(d.settings.bailout),
                         seed: r.seed.unwrap_or(d.settings.seed),
+                        filtered_shadows: match r.shadows.as_deref().unwrap_or("opaque") {
+                            "opaque" => false,
+                            "filtered" => true,
+                            other => {
+                                return Err(err(format!("[render]: shadows `{other}` is neither opaque nor filtered")));
+                            }
+                        },
                     },
                     ambient: r.ambient.map_or(d.ambient, Rgb::vec),
                     background: r.background.map_or(d.background, Rgb::vec),
@@ -644,6 +651,7 @@ struct RawRender {
     seed: Option<u64>,
     ambient: Option<Rgb>,
     background: Option<Rgb>,
+    shadows: Option<String>,
 }
 
 #[derive(Deserialize)]

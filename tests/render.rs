@@ -423,3 +423,65 @@ mesh = "q"
     assert!(e.to_string().contains("nothere.png"), "{e}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn filtered_shadows_pass_through_glass() {
+    // A floor lit from straight above through a thin pane of coloured glass (index 1, so the
+    // refracted camera rays are not bent): opaque shadows leave the floor under the pane dark;
+    // filtered ones let through transmit² (two crossings) of the light.
+    let scene = |shadows: &str| {
+        format!(
+            r#"
+[camera]
+projection = "orthographic"
+width = 4.0
+eye = [0.0, 10.0, 0.0]
+look_at = [0.0, 0.0, 0.0]
+up = [0.0, 0.0, 1.0]
+[render]
+ambient = 0.0
+shadows = "{shadows}"
+[[light]]
+position = [0.0, 50.0, 0.0]
+[material.floor]
+color = 1.0
+ambient = 0.0
+[material.pane]
+color = 0.0
+ambient = 0.0
+transmit = [1.0, 0.5, 0.25]
+ior = 1.0
+fresnel = "off"
+[mesh.floor]
+quad = {{ size = [20.0, 20.0] }}
+material = "floor"
+[mesh.pane]
+box = {{ min = [-5.0, 2.0, -5.0], max = [5.0, 2.1, 5.0] }}
+material = "pane"
+[[instance]]
+mesh = "floor"
+[[instance]]
+mesh = "pane"
+"#
+        )
+    };
+    let render = |shadows: &str| {
+        let (file, scene, world) = load(&scene(shadows));
+        let settings = Settings { width: 8, height: 8, ..file.render.settings };
+        let r = renderer(&file, &scene, &world, settings);
+        let (img, st) = r.render(&|_| {}).unwrap();
+        let (rec, rst) = r.render_recursive().unwrap();
+        assert_eq!(st.rays, rst.rays);
+        assert!(img.pixels.iter().zip(&rec.pixels).all(|(a, b)| (*a - *b).abs().max_element() < 1e-5));
+        img.get(4, 4)
+    };
+    // The camera sees the floor through the pane: transmit² on the way in, again on the light's.
+    let opaque = render("opaque");
+    assert_eq!(opaque, Vec3::ZERO);
+    let filtered = render("filtered");
+    let t2 = Vec3::new(1.0, 0.25, 0.0625);
+    let lit = filtered / (t2 * t2);
+    assert!((lit.x - lit.y).abs() < 1e-4 && (lit.x - lit.z).abs() < 1e-4 && lit.x > 0.9, "{filtered}");
+    let e = SceneFile::parse(&scene("soft"), Path::new("/v/s.toml")).unwrap_err();
+    assert!(e.to_string().contains("shadows `soft`"), "{e}");
+}

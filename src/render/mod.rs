@@ -62,11 +62,14 @@ pub struct Settings {
     pub bailout: f32,
     /// Seed of the per-pixel jitter.
     pub seed: u64,
+    /// Shadow feelers pass through transparent surfaces, their light filtered by each surface's
+    /// transmission (POV-Ray's default); otherwise any surface blocks them (Whitted's).
+    pub filtered_shadows: bool,
 }
 
 impl Default for Settings {
     fn default() -> Self {
-        Self { width: 640, height: 480, spp: 1, max_depth: 5, bailout: 1.0 / 255.0, seed: 0 }
+        Self { width: 640, height: 480, spp: 1, max_depth: 5, bailout: 1.0 / 255.0, seed: 0, filtered_shadows: false }
     }
 }
 
@@ -106,6 +109,11 @@ pub struct World {
 }
 
 impl World {
+    /// Whether any material lets light through (filtered shadows need closest hits only then).
+    pub fn has_transparent(&self) -> bool {
+        self.materials.iter().any(Material::is_transparent)
+    }
+
     /// Typed errors for materials, lights or colours that are out of range, and for surfaces that
     /// name materials the table does not have.
     pub fn check(&self) -> Result<()> {
@@ -227,6 +235,12 @@ struct Wave {
     occluded: Vec<bool>,
     next_rays: RayStream,
     next_paths: Vec<Path>,
+    /// Filtered shadows: the feelers still travelling, and the next round's.
+    chain: RayStream,
+    chain_info: Vec<(u32, Vec3)>,
+    next_chain: RayStream,
+    next_info: Vec<(u32, Vec3)>,
+    chain_hits: HitStream,
 }
 
 impl<Q: Query> Renderer<'_, Q> {
@@ -347,18 +361,51 @@ impl<Q: Query> Renderer<'_, Q> {
             stats.shade_seconds += t0.elapsed().as_secs_f64();
 
             // Shadow feelers, light by light (each light's feelers share a direction).
-            for (rays, info) in &w.shadows {
+            let Wave { shadows, occluded, chain, chain_info, next_chain, next_info, chain_hits, .. } = &mut *w;
+            for (rays, info) in shadows.iter() {
                 if rays.is_empty() {
                     continue;
                 }
-                let t0 = Instant::now();
-                self.query.occluded_stream(rays, &mut w.occluded, coherence);
-                stats.trace_seconds += t0.elapsed().as_secs_f64();
-                stats.rays[RayKind::Shadow as usize] += rays.len() as u64;
-                for (&(p, c), &o) in info.iter().zip(&w.occluded) {
-                    if !o {
-                        acc[p as usize] += c;
+                if !s.filtered_shadows || !self.world.has_transparent() {
+                    let t0 = Instant::now();
+                    self.query.occluded_stream(rays, occluded, coherence);
+                    stats.trace_seconds += t0.elapsed().as_secs_f64();
+                    stats.rays[RayKind::Shadow as usize] += rays.len() as u64;
+                    for (&(p, c), &o) in info.iter().zip(occluded.iter()) {
+                        if !o {
+                            acc[p as usize] += c;
+                        }
                     }
+                    continue;
+                }
+                // Filtered: closest hits, and through transparent surfaces again, round by round.
+                chain.clone_from(rays);
+                chain_info.clone_from(info);
+                for _ in 0..shade::MAX_SHADOW_CROSSINGS {
+                    if chain.is_empty() {
+                        break;
+                    }
+                    let t0 = Instant::now();
+                    self.query.intersect_stream(chain, chain_hits, coherence);
+                    stats.trace_seconds += t0.elapsed().as_secs_f64();
+                    stats.rays[RayKind::Shadow as usize] += chain.len() as u64;
+                    next_chain.clear();
+                    next_info.clear();
+                    for (i, &(p, c)) in chain_info.iter().enumerate() {
+                        match chain_hits.get(i) {
+                            None => acc[p as usize] += c,
+                            Some(h) => {
+                                if let shade::ShadowStep::Through { ray, radiance } =
+                                    shade::shadow_through(self.world, s, &chain.get(i), &h, c)
+                                {
+                                    next_chain.push(&ray);
+                                    next_info.push((p, radiance));
+                                }
+                            }
+                        }
+                    }
+                    std::mem::swap(chain, next_chain);
+                    std::mem::swap(chain_info, next_info);
                 }
             }
             std::mem::swap(&mut w.rays, &mut w.next_rays);
@@ -459,6 +506,39 @@ impl<Q: Query> Renderer<'_, Q> {
         for e in emitted {
             match e {
                 Emission::Radiance(c) => sum += c,
+                Emission::Shadow { ray: r, radiance, .. }
+                    if self.settings.filtered_shadows && self.world.has_transparent() =>
+                {
+                    let (mut r, mut c) = (r, radiance);
+                    let mut lit = false;
+                    for _ in 0..shade::MAX_SHADOW_CROSSINGS {
+                        stats.rays[RayKind::Shadow as usize] += 1;
+                        let hit = self.query.intersect(&r);
+                        if let Some(t) = tree.as_mut() {
+                            t.push(TreeNode {
+                                parent: me,
+                                kind: RayKind::Shadow,
+                                depth: path.depth,
+                                origin: r.origin.to_array(),
+                                dir: r.dir.to_array(),
+                                t: hit.map(|h| h.t),
+                                tfar: r.tfar.is_finite().then_some(r.tfar),
+                                weight: c.to_array(),
+                            });
+                        }
+                        let Some(h) = hit else {
+                            lit = true;
+                            break;
+                        };
+                        match shade::shadow_through(self.world, &self.settings, &r, &h, c) {
+                            shade::ShadowStep::Blocked => break,
+                            shade::ShadowStep::Through { ray, radiance } => (r, c) = (ray, radiance),
+                        }
+                    }
+                    if lit {
+                        sum += c;
+                    }
+                }
                 Emission::Shadow { ray: r, radiance, .. } => {
                     stats.rays[RayKind::Shadow as usize] += 1;
                     let blocked = self.query.occluded(&r);

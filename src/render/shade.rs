@@ -273,3 +273,37 @@ mod tests {
         assert_eq!(m.top(), Some(3), "deeper media than MAX_MEDIA are ignored");
     }
 }
+
+/// Most surfaces a filtered shadow feeler passes through; a feeler that would cross more counts as
+/// blocked.
+pub const MAX_SHADOW_CROSSINGS: u32 = 8;
+
+/// What a shadow feeler does at a surface when shadows are filtered.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ShadowStep {
+    /// An opaque surface (or too little light left): the light does not arrive.
+    Blocked,
+    /// A transparent surface: the feeler goes on from just behind it to the same end, its light
+    /// filtered by the surface's `transmit` colour (POV-Ray's filtered shadows: no refraction,
+    /// no caustics, no absorption along the way).
+    Through { ray: Ray, radiance: Vec3 },
+}
+
+/// The next step of the shadow feeler `ray` carrying `radiance`, which hit `hit`.
+pub fn shadow_through(world: &World, settings: &Settings, ray: &Ray, hit: &Hit, radiance: Vec3) -> ShadowStep {
+    let Some(sp) = world.surfaces.resolve(ray, hit) else { return ShadowStep::Blocked };
+    let mat = &world.materials[sp.material as usize];
+    let radiance = radiance * mat.transmit;
+    if !mat.is_transparent() || radiance.max_element() < settings.bailout.max(f32::MIN_POSITIVE) {
+        return ShadowStep::Blocked;
+    }
+    let n_face = if ray.dir.dot(sp.ng) < 0.0 { sp.ng } else { -sp.ng };
+    let origin = offset_ray_origin(sp.p, -n_face);
+    let ray = if ray.tfar.is_finite() {
+        let end = ray.origin + ray.dir * ray.tfar;
+        Ray::segment(origin, end - origin, 0.0, 1.0)
+    } else {
+        Ray::new(origin, ray.dir)
+    };
+    ShadowStep::Through { ray, radiance }
+}
