@@ -485,3 +485,42 @@ mesh = "pane"
     let e = SceneFile::parse(&scene("soft"), Path::new("/v/s.toml")).unwrap_err();
     assert!(e.to_string().contains("shadows `soft`"), "{e}");
 }
+
+/// A backend whose stream queries use the rayon pool themselves.
+struct ParallelStreams<'a>(&'a InstancedScene);
+
+impl strahl::Query for ParallelStreams<'_> {
+    fn intersect(&self, ray: &strahl::Ray) -> Option<strahl::Hit> {
+        self.0.intersect(ray)
+    }
+    fn occluded(&self, ray: &strahl::Ray) -> bool {
+        self.0.occluded(ray)
+    }
+    fn intersect_packet_each(&self, rays: &strahl::RayPacket, f: impl FnMut(usize, &strahl::Hit)) {
+        self.0.intersect_packet_each(rays, f)
+    }
+    fn occluded_packet(&self, rays: &strahl::RayPacket) -> u32 {
+        self.0.occluded_packet(rays)
+    }
+    fn intersect_stream(&self, rays: &strahl::RayStream, hits: &mut strahl::HitStream, c: strahl::Coherence) {
+        self.0.intersect_stream_par(rays, hits, c)
+    }
+    fn occluded_stream(&self, rays: &strahl::RayStream, occluded: &mut Vec<bool>, c: strahl::Coherence) {
+        self.0.occluded_stream_par(rays, occluded, c)
+    }
+}
+
+#[test]
+fn backends_that_use_the_pool_inside_queries() {
+    // A backend that answers streams on the pool gives the same image. (While a run waits for
+    // such a query its thread may start another run; the renderer gives that one fresh buffers.
+    // Whether it happens depends on rayon's scheduling, so this test may not exercise it.)
+    let (file, scene, world) = load(&whitted());
+    let settings = Settings { width: 256, height: 192, ..file.render.settings };
+    let camera = file.camera.unwrap().render_camera().unwrap();
+    let two = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+    let (a, _) = two.install(|| Renderer { query: &scene, world: &world, camera, settings }.render(&|_| {})).unwrap();
+    let par = ParallelStreams(&scene);
+    let (b, _) = two.install(|| Renderer { query: &par, world: &world, camera, settings }.render(&|_| {})).unwrap();
+    assert_eq!(a, b);
+}

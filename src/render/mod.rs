@@ -285,7 +285,12 @@ impl<Q: Query> Renderer<'_, Q> {
             .map(|run| {
                 // One set of buffers per worker thread, kept for the next render too
                 // (`map_init` would make one per split of the work: fresh pages each run).
-                let out = WAVE_BUFFERS.with_borrow_mut(|wave| self.wavefront(wave, run));
+                // A backend whose queries run rayon work could let this thread start another
+                // run while one is in progress: that run gets fresh buffers instead.
+                let out = WAVE_BUFFERS.with(|cell| match cell.try_borrow_mut() {
+                    Ok(mut wave) => self.wavefront(&mut wave, run),
+                    Err(_) => self.wavefront(&mut Wave::default(), run),
+                });
                 let n = done.fetch_add(run.len() as u64 * s.spp as u64, std::sync::atomic::Ordering::Relaxed);
                 progress(n + run.len() as u64 * s.spp as u64);
                 out
