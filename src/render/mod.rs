@@ -209,6 +209,23 @@ pub struct TreeNode {
     pub weight: [f32; 3],
 }
 
+impl TreeNode {
+    /// A shadow feeler of the node `parent` at `depth`, stopped at `blocker` (its `t`) or not,
+    /// bringing `radiance` if unblocked.
+    fn shadow(parent: Option<usize>, depth: u32, r: &Ray, blocker: Option<f32>, radiance: Vec3) -> Self {
+        Self {
+            parent,
+            kind: RayKind::Shadow,
+            depth,
+            origin: r.origin.to_array(),
+            dir: r.dir.to_array(),
+            t: blocker,
+            tfar: r.tfar.is_finite().then_some(r.tfar),
+            weight: radiance.to_array(),
+        }
+    }
+}
+
 /// Camera rays per wavefront: one parallel task, and the longest stream it traces.
 pub const WAVE: usize = 4096;
 
@@ -520,16 +537,7 @@ impl<Q: Query> Renderer<'_, Q> {
                         stats.rays[RayKind::Shadow as usize] += 1;
                         let hit = self.query.intersect(&r);
                         if let Some(t) = tree.as_mut() {
-                            t.push(TreeNode {
-                                parent: me,
-                                kind: RayKind::Shadow,
-                                depth: path.depth,
-                                origin: r.origin.to_array(),
-                                dir: r.dir.to_array(),
-                                t: hit.map(|h| h.t),
-                                tfar: r.tfar.is_finite().then_some(r.tfar),
-                                weight: c.to_array(),
-                            });
+                            t.push(TreeNode::shadow(me, path.depth, &r, hit.map(|h| h.t), c));
                         }
                         let Some(h) = hit else {
                             lit = true;
@@ -549,16 +557,7 @@ impl<Q: Query> Renderer<'_, Q> {
                     let blocked = self.query.occluded(&r);
                     if let Some(t) = tree.as_mut() {
                         let blocker = if blocked { self.query.intersect(&r).map(|h| h.t) } else { None };
-                        t.push(TreeNode {
-                            parent: me,
-                            kind: RayKind::Shadow,
-                            depth: path.depth,
-                            origin: r.origin.to_array(),
-                            dir: r.dir.to_array(),
-                            t: blocker,
-                            tfar: r.tfar.is_finite().then_some(r.tfar),
-                            weight: radiance.to_array(),
-                        });
+                        t.push(TreeNode::shadow(me, path.depth, &r, blocker, radiance));
                     }
                     if !blocked {
                         sum += radiance;
