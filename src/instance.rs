@@ -473,6 +473,38 @@ impl InstancedScene {
         let p = &self.placed[k as usize];
         Hit { ng: Vec3::from(p.normal_to_world * Vec3A::from(hit.ng)), inst_id: p.id, ..*hit }
     }
+
+    /// The triangle and box tests every object was built for.
+    pub fn tests(&self) -> (TriangleTest, BoxTest) {
+        (self.test, self.box_test)
+    }
+
+    /// The top level's root, if any instance is placed (for the walks of `crate::query`).
+    pub(crate) fn top_root(&self) -> Option<u32> {
+        (self.root != EMPTY).then_some(self.root)
+    }
+
+    /// The instance level as a tree for [`walk1`] (for the walks of `crate::query`).
+    pub(crate) fn top_tree(&self) -> Tree<'_> {
+        self.instance_tree()
+    }
+
+    /// The object of placed instance `k` and `ray` moved into its space (same `t`).
+    pub(crate) fn object_ray_of(&self, k: usize, ray: &Ray) -> (u32, Ray) {
+        let p = &self.placed[k];
+        (p.object, object_ray(&p.to_object, ray, ray.tfar))
+    }
+
+    /// Placed instance `k`'s object, object-to-world transform and instance id.
+    pub(crate) fn placed_of(&self, k: usize) -> (u32, Affine3A, u32) {
+        let p = &self.placed[k];
+        (p.object, self.instances[p.id as usize].transform, p.id)
+    }
+
+    /// [`world_hit`](Self::world_hit) for the walks of `crate::query`.
+    pub(crate) fn world_hit_of(&self, k: u32, hit: &Hit) -> Hit {
+        self.world_hit(k, hit)
+    }
 }
 
 /// Entering lanes from which an incoherent closest-hit packet walks an object as a packet (with

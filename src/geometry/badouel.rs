@@ -10,7 +10,7 @@
 
 use glam::{DVec3, Vec3};
 
-use super::triangle::{Kernel, Ray4, RayK, TriBlock, nearest};
+use super::triangle::{BlockHits, Kernel, Ray4, RayK, TriBlock};
 use crate::simd::*;
 
 /// The nine rows and the aux bits (axis k, normal sign) of one triangle.
@@ -56,7 +56,7 @@ impl Kernel for Badouel {
     fn pre(_: &Ray4) {}
 
     #[inline(always)]
-    fn intersect1(b: &TriBlock, r: &Ray4, _: &(), tnear: f32, tfar: f32) -> Option<(usize, f32, f32, f32)> {
+    fn lanes1(b: &TriBlock, r: &Ray4, _: &(), tnear: f32, tfar: f32) -> Option<BlockHits> {
         // Per lane, the ray's components along k, u = k + 1 and v = k + 2.
         let kf = f32x4::new(std::array::from_fn(|l| (b.aux(l) & 3) as f32));
         let (k0, k1) = (kf.simd_eq(f32x4::splat(0.0)), kf.simd_eq(f32x4::splat(1.0)));
@@ -81,7 +81,7 @@ impl Kernel for Badouel {
         let beta = row(3) * hu + row(4) * hv + row(5);
         let gamma = row(6) * hu + row(7) * hv + row(8);
         let valid = valid & beta.simd_ge(zero) & gamma.simd_ge(zero) & (beta + gamma).simd_le(f32x4::splat(1.0));
-        nearest(valid, t, beta, gamma)
+        Some((valid, t, beta, gamma))
     }
 
     #[inline(always)]

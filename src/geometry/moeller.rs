@@ -4,7 +4,7 @@
 //! dot products fused as Embree's `vec3.h` writes them, so that hits agree with Embree's default
 //! scenes.
 
-use super::triangle::{BLOCK, Kernel, Ray4, RayK, TriBlock, cross, dot, nearest, sane};
+use super::triangle::{BLOCK, BlockHits, Kernel, Ray4, RayK, TriBlock, cross, dot, sane};
 use crate::simd::*;
 
 pub(crate) struct Moller;
@@ -16,7 +16,7 @@ impl Kernel for Moller {
     fn pre(_: &Ray4) {}
 
     #[inline(always)]
-    fn intersect1(b: &TriBlock, r: &Ray4, _: &(), tnear: f32, tfar: f32) -> Option<(usize, f32, f32, f32)> {
+    fn lanes1(b: &TriBlock, r: &Ray4, _: &(), tnear: f32, tfar: f32) -> Option<BlockHits> {
         let ld = |k: usize| [f32x4::new(b.rows[k]), f32x4::new(b.rows[k + 1]), f32x4::new(b.rows[k + 2])];
         let (v0, e1, e2) = (ld(0), ld(3), ld(6));
         // Edge tests: the signs of U and V decide the hit, made independent of the winding by
@@ -42,7 +42,7 @@ impl Kernel for Moller {
         }
         let inv = f32x4::splat(1.0) / abs_den;
         let t = tt * inv;
-        nearest(valid & sane(inv, t, f32x4::splat(tnear), f32x4::splat(tfar)), t, u * inv, v * inv)
+        Some((valid & sane(inv, t, f32x4::splat(tnear), f32x4::splat(tfar)), t, u * inv, v * inv))
     }
 
     #[inline(always)]

@@ -155,15 +155,26 @@ pub(crate) struct RayK {
     pub tnear: Pf,
 }
 
+/// A block test's result for one ray: `(valid, t, u, v)`, four lanes each.
+pub(crate) type BlockHits = (f32x4, f32x4, f32x4, f32x4);
+
 /// One ray–triangle test in its two SIMD forms. `Pre` is what the test precomputes per ray.
 pub(crate) trait Kernel {
     type Pre: Copy;
 
     fn pre(r: &Ray4) -> Self::Pre;
 
+    /// Every triangle of a block one ray hits in `(tnear, tfar]`: the valid lanes (all bits set)
+    /// with their `t`, `u`, `v`; `None` where no lane can hit. Lanes outside the mask hold
+    /// anything.
+    fn lanes1(b: &TriBlock, r: &Ray4, pre: &Self::Pre, tnear: f32, tfar: f32) -> Option<BlockHits>;
+
     /// The nearest hit of one ray among the triangles of a block in `(tnear, tfar]`, as
     /// `(lane, t, u, v)`; among equal distances the lowest lane wins.
-    fn intersect1(b: &TriBlock, r: &Ray4, pre: &Self::Pre, tnear: f32, tfar: f32) -> Option<(usize, f32, f32, f32)>;
+    #[inline(always)]
+    fn intersect1(b: &TriBlock, r: &Ray4, pre: &Self::Pre, tnear: f32, tfar: f32) -> Option<(usize, f32, f32, f32)> {
+        Self::lanes1(b, r, pre, tnear, tfar).and_then(|(valid, t, u, v)| nearest(valid, t, u, v))
+    }
 
     /// The lanes of a packet (within `active`) hitting triangle `lane` of `b` in `(tnear, tfar]`,
     /// with their `t`, `u`, `v`.

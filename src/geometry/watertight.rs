@@ -9,7 +9,7 @@
 
 use glam::Vec3;
 
-use super::triangle::{Kernel, Ray4, RayK, TriBlock, nearest, sane};
+use super::triangle::{BlockHits, Kernel, Ray4, RayK, TriBlock, sane};
 use crate::simd::*;
 
 /// Per-ray shear: axis permutation `(kx, ky, kz)` and `(Sx, Sy, Sz)`.
@@ -67,7 +67,7 @@ impl Kernel for Watertight {
     }
 
     #[inline(always)]
-    fn intersect1(b: &TriBlock, r: &Ray4, sh: &Shear, tnear: f32, tfar: f32) -> Option<(usize, f32, f32, f32)> {
+    fn lanes1(b: &TriBlock, r: &Ray4, sh: &Shear, tnear: f32, tfar: f32) -> Option<BlockHits> {
         let [kx, ky, kz] = sh.k;
         let rel = |first: usize| -> [f32x4; 3] { std::array::from_fn(|a| f32x4::new(b.rows[first + a]) - r.o[a]) };
         let (a, bb, c) = (rel(0), rel(3), rel(6));
@@ -102,7 +102,7 @@ impl Kernel for Watertight {
         }
         let inv = f32x4::splat(1.0) / det;
         let t = t_s / abs_det;
-        nearest(valid & sane(inv, t, f32x4::splat(tnear), f32x4::splat(tfar)), t, v * inv, w * inv)
+        Some((valid & sane(inv, t, f32x4::splat(tnear), f32x4::splat(tfar)), t, v * inv, w * inv))
     }
 
     /// All lanes at once: each lane's axis permutation and shear are selected by mask, so the
