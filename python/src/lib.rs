@@ -1,0 +1,404 @@
+//! `strahl._strahl`: the extension module under the Python package `strahl` (python/strahl).
+//!
+//! One class, [`Core`]: a built scene (flat or two-level) with its own rayon pool, queried with
+//! C-contiguous float32 numpy arrays that the Python side has checked and converted. Every query
+//! releases the GIL and runs on the scene's pool; a `Core` is immutable once built (a frozen
+//! class), so any number of Python threads may query it at once. Shapes are checked here again:
+//! a wrong one is a `ValueError`, never a panic.
+
+use glam::{Affine3A, Mat3A, Vec3, Vec3A};
+use numpy::ndarray::{Array1, Array2};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray2, PyUntypedArrayMethods};
+use pyo3::exceptions::{PyRuntimeError, PyValueError};
+use pyo3::prelude::*;
+use rayon::prelude::*;
+use strahl::query::batch;
+use strahl::{
+    BuildConfig, Coherence, Hit, HitStream, INVALID_ID, Instance, InstancedScene, Query, Ray, RayStream, Scene,
+    TriangleMesh,
+};
+
+/// Rays per parallel job of `cast_rays` and `test_occlusions`: converted, traced and written back
+/// by one thread (strahl's own stream chunk).
+const CHUNK: usize = strahl::STREAM_CHUNK;
+
+/// A built scene: flat when no geometry is instanced, else every geometry is an object of a
+/// two-level scene.
+enum World {
+    Flat(Scene),
+    Instanced {
+        scene: InstancedScene,
+        /// Per placed instance: the geometry id it shows and the instance id users see
+        /// (`INVALID_ID` for a geometry shown as added).
+        ids: Vec<(u32, u32)>,
+    },
+}
+
+/// Runs `$body` with `$q` bound to the world's scene, whatever its kind.
+macro_rules! on_world {
+    ($world:expr, $q:ident => $body:expr) => {
+        match $world {
+            World::Flat($q) => $body,
+            World::Instanced { scene: $q, .. } => $body,
+        }
+    };
+}
+
+#[pyclass(frozen, module = "strahl._strahl")]
+struct Core {
+    world: World,
+    pool: rayon::ThreadPool,
+}
+
+fn value_error(e: impl std::fmt::Display) -> PyErr {
+    PyValueError::new_err(e.to_string())
+}
+
+/// The rows of a C-contiguous `(n, width)` float32 array as one slice.
+fn rows<'a>(a: &'a PyReadonlyArray2<'_, f32>, width: usize, what: &str) -> PyResult<&'a [f32]> {
+    if a.shape()[1] != width {
+        return Err(value_error(format!("{what} must have shape (n, {width}), got {:?}", a.shape())));
+    }
+    a.as_slice().map_err(|_| value_error(format!("{what} must be C-contiguous")))
+}
+
+/// A 4×4 row-major homogeneous matrix as an affine map, if its last row is `0 0 0 1`.
+fn affine_of(m: &[f32]) -> Option<Affine3A> {
+    if m[12..16] != [0.0, 0.0, 0.0, 1.0] {
+        return None;
+    }
+    let col = |c: usize| Vec3A::new(m[c], m[4 + c], m[8 + c]);
+    Some(Affine3A { matrix3: Mat3A::from_cols(col(0), col(1), col(2)), translation: col(3) })
+}
+
+impl World {
+    /// The geometry id and user-facing instance id of a hit.
+    #[inline]
+    fn ids(&self, h: &Hit) -> (u32, u32) {
+        match self {
+            World::Flat(_) => (h.geom_id, INVALID_ID),
+            World::Instanced { ids, .. } => ids.get(h.inst_id as usize).copied().unwrap_or((INVALID_ID, INVALID_ID)),
+        }
+    }
+}
+
+/// The rays of an `(n, 6)` array (origin, direction) over `(tnear, tfar]`.
+fn ray_of(r: &[f32], tnear: f32, tfar: f32) -> Ray {
+    Ray::segment(Vec3::new(r[0], r[1], r[2]), Vec3::new(r[3], r[4], r[5]), tnear, tfar)
+}
+
+/// Whether a chunk of rays is a camera's: one origin for all.
+fn one_origin(rays: &[f32]) -> bool {
+    rays.chunks_exact(6).all(|r| r[..3] == rays[..3])
+}
+
+fn points_of(p: &[f32]) -> Vec<Vec3> {
+    p.chunks_exact(3).map(|c| Vec3::new(c[0], c[1], c[2])).collect()
+}
+
+type Arr1<'py, T> = Bound<'py, PyArray1<T>>;
+type Arr2<'py, T> = Bound<'py, PyArray2<T>>;
+
+/// Per-query hit arrays: t, geometry ids, primitive ids, uvs (n, 2), unit normals (n, 3), instance
+/// ids.
+type HitArrays<'py> = (Arr1<'py, f32>, Arr1<'py, u32>, Arr1<'py, u32>, Arr2<'py, f32>, Arr2<'py, f32>, Arr1<'py, u32>);
+
+/// Hit fields in flat vectors, before they become numpy arrays.
+struct HitColumns {
+    t: Vec<f32>,
+    geom: Vec<u32>,
+    prim: Vec<u32>,
+    uv: Vec<f32>,
+    normal: Vec<f32>,
+    inst: Vec<u32>,
+}
+
+impl HitColumns {
+    fn misses(n: usize) -> Self {
+        Self {
+            t: vec![f32::INFINITY; n],
+            geom: vec![INVALID_ID; n],
+            prim: vec![INVALID_ID; n],
+            uv: vec![0.0; 2 * n],
+            normal: vec![0.0; 3 * n],
+            inst: vec![INVALID_ID; n],
+        }
+    }
+
+    fn into_arrays(self, py: Python<'_>) -> PyResult<HitArrays<'_>> {
+        let n = self.t.len();
+        let two = |v: Vec<f32>, w: usize| Array2::from_shape_vec((n, w), v).map_err(value_error);
+        Ok((
+            Array1::from(self.t).into_pyarray(py),
+            Array1::from(self.geom).into_pyarray(py),
+            Array1::from(self.prim).into_pyarray(py),
+            two(self.uv, 2)?.into_pyarray(py),
+            two(self.normal, 3)?.into_pyarray(py),
+            Array1::from(self.inst).into_pyarray(py),
+        ))
+    }
+}
+
+#[pymethods]
+impl Core {
+    /// Builds the scene. `geometries`: `(vertices (n, 3) float32, triangles (m, 3) uint32)` pairs,
+    /// geometry ids in list order. `placements`: `(geometry id, 4×4 row-major transform, instance
+    /// id)` triples, or an empty list for a flat scene. `threads`: the pool's size (0: one per
+    /// core). `watertight`: the watertight triangle test with the conservative box test, else
+    /// Möller–Trumbore with the fast box test.
+    #[new]
+    #[pyo3(signature = (geometries, placements, threads, watertight))]
+    fn new(
+        py: Python<'_>,
+        geometries: Vec<(PyReadonlyArray2<'_, f32>, PyReadonlyArray2<'_, u32>)>,
+        placements: Vec<(u32, PyReadonlyArray2<'_, f32>, u32)>,
+        threads: usize,
+        watertight: bool,
+    ) -> PyResult<Self> {
+        let mut meshes = Vec::with_capacity(geometries.len());
+        for (g, (v, f)) in geometries.iter().enumerate() {
+            let v = rows(v, 3, "vertices")?;
+            if f.shape()[1] != 3 {
+                return Err(value_error(format!("triangles must have shape (m, 3), got {:?}", f.shape())));
+            }
+            let f = f.as_slice().map_err(|_| value_error("triangles must be C-contiguous"))?;
+            meshes.push(TriangleMesh::from_slices(format!("geometry {g}"), v, f).map_err(value_error)?);
+        }
+        let mut instances = Vec::with_capacity(placements.len());
+        let mut ids = Vec::with_capacity(placements.len());
+        for (g, m, id) in &placements {
+            if *g as usize >= meshes.len() {
+                return Err(value_error(format!("no geometry {g}")));
+            }
+            let m = m.as_slice().map_err(|_| value_error("transforms must be C-contiguous"))?;
+            let t = (m.len() == 16).then(|| affine_of(m)).flatten().ok_or_else(|| {
+                value_error(format!("the transform of instance {id} is not a 4×4 affine matrix (last row 0 0 0 1)"))
+            })?;
+            instances.push(Instance::new(*g as usize, t));
+            ids.push((*g, *id));
+        }
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .thread_name(|i| format!("strahl-{i}"))
+            .build()
+            .map_err(|e| PyRuntimeError::new_err(format!("cannot start the thread pool: {e}")))?;
+        let cfg = if watertight { BuildConfig::watertight() } else { BuildConfig::default() };
+        let flat = placements.is_empty();
+        let world = py.detach(|| {
+            pool.install(|| -> strahl::Result<World> {
+                if flat {
+                    Ok(World::Flat(Scene::build(meshes, &cfg)?))
+                } else {
+                    let objects = meshes.into_iter().map(|m| vec![m]).collect();
+                    Ok(World::Instanced { scene: InstancedScene::build(objects, instances, &cfg)?, ids })
+                }
+            })
+        });
+        Ok(Self { world: world.map_err(value_error)?, pool })
+    }
+
+    /// Threads of the scene's pool.
+    #[getter]
+    fn threads(&self) -> usize {
+        self.pool.current_num_threads()
+    }
+
+    /// Triangles in the BVH (the hittable ones; an instanced geometry counts once).
+    #[getter]
+    fn triangles(&self) -> usize {
+        match &self.world {
+            World::Flat(s) => s.stats().triangles,
+            World::Instanced { scene, .. } => scene.stats().unique_triangles,
+        }
+    }
+
+    /// Closest hits of `(n, 6)` rays over `(tnear, tfar]`.
+    fn cast_rays<'py>(
+        &self,
+        py: Python<'py>,
+        rays: PyReadonlyArray2<'py, f32>,
+        tnear: f32,
+        tfar: f32,
+    ) -> PyResult<HitArrays<'py>> {
+        let r = rows(&rays, 6, "rays")?;
+        let n = r.len() / 6;
+        let mut out = HitColumns::misses(n);
+        py.detach(|| {
+            self.pool.install(|| {
+                let HitColumns { t, geom, prim, uv, normal, inst } = &mut out;
+                (
+                    r.par_chunks(6 * CHUNK),
+                    (t.par_chunks_mut(CHUNK), geom.par_chunks_mut(CHUNK), prim.par_chunks_mut(CHUNK)),
+                    (uv.par_chunks_mut(2 * CHUNK), normal.par_chunks_mut(3 * CHUNK), inst.par_chunks_mut(CHUNK)),
+                )
+                    .into_par_iter()
+                    .with_max_len(1)
+                    .for_each(|(r, (t, geom, prim), (uv, normal, inst))| {
+                        let mut stream = RayStream::with_capacity(t.len());
+                        for ray in r.chunks_exact(6) {
+                            stream.push(&ray_of(ray, tnear, tfar));
+                        }
+                        let coherence = if one_origin(r) { Coherence::Coherent } else { Coherence::Incoherent };
+                        let mut hits = HitStream::misses(0);
+                        on_world!(&self.world, q => q.intersect_stream(&stream, &mut hits, coherence));
+                        for i in 0..t.len() {
+                            if let Some(h) = hits.get(i) {
+                                let (g, k) = self.world.ids(&h);
+                                t[i] = h.t;
+                                (geom[i], prim[i], inst[i]) = (g, h.prim_id, k);
+                                uv[2 * i..2 * i + 2].copy_from_slice(&[h.u, h.v]);
+                                normal[3 * i..3 * i + 3].copy_from_slice(&h.ng.normalize_or_zero().to_array());
+                            }
+                        }
+                    });
+            })
+        });
+        out.into_arrays(py)
+    }
+
+    /// Whether anything lies on each of `(n, 6)` rays in `(tnear, tfar]`.
+    fn test_occlusions<'py>(
+        &self,
+        py: Python<'py>,
+        rays: PyReadonlyArray2<'py, f32>,
+        tnear: f32,
+        tfar: f32,
+    ) -> PyResult<Arr1<'py, bool>> {
+        let r = rows(&rays, 6, "rays")?;
+        let mut out = vec![false; r.len() / 6];
+        py.detach(|| {
+            self.pool.install(|| {
+                out.par_chunks_mut(CHUNK).zip(r.par_chunks(6 * CHUNK)).with_max_len(1).for_each(|(o, r)| {
+                    let mut stream = RayStream::with_capacity(o.len());
+                    for ray in r.chunks_exact(6) {
+                        stream.push(&ray_of(ray, tnear, tfar));
+                    }
+                    let coherence = if one_origin(r) { Coherence::Coherent } else { Coherence::Incoherent };
+                    let mut occ = Vec::new();
+                    on_world!(&self.world, q => q.occluded_stream(&stream, &mut occ, coherence));
+                    o.copy_from_slice(&occ);
+                });
+            })
+        });
+        Ok(Array1::from(out).into_pyarray(py))
+    }
+
+    /// Surface crossings of each of `(n, 6)` rays in `(tnear, tfar]` (shared edges and vertices
+    /// counted once).
+    fn count_intersections<'py>(
+        &self,
+        py: Python<'py>,
+        rays: PyReadonlyArray2<'py, f32>,
+        tnear: f32,
+        tfar: f32,
+    ) -> PyResult<Arr1<'py, u32>> {
+        let r = rows(&rays, 6, "rays")?;
+        let rays: Vec<Ray> = r.chunks_exact(6).map(|x| ray_of(x, tnear, tfar)).collect();
+        let mut out = vec![0u32; rays.len()];
+        py.detach(|| self.pool.install(|| on_world!(&self.world, q => batch::count_hits(q, &rays, true, &mut out))));
+        Ok(Array1::from(out).into_pyarray(py))
+    }
+
+    /// Every crossing of each of `(n, 6)` rays, nearest first: `(ray_splits (n + 1), ray_ids,
+    /// t_hit, geometry_ids, primitive_ids, primitive_uvs, instance_ids)`.
+    #[allow(clippy::type_complexity)]
+    fn list_intersections<'py>(
+        &self,
+        py: Python<'py>,
+        rays: PyReadonlyArray2<'py, f32>,
+        tnear: f32,
+        tfar: f32,
+    ) -> PyResult<(
+        Arr1<'py, u64>,
+        Arr1<'py, u32>,
+        Arr1<'py, f32>,
+        Arr1<'py, u32>,
+        Arr1<'py, u32>,
+        Arr2<'py, f32>,
+        Arr1<'py, u32>,
+    )> {
+        let r = rows(&rays, 6, "rays")?;
+        let rays: Vec<Ray> = r.chunks_exact(6).map(|x| ray_of(x, tnear, tfar)).collect();
+        let lists = py.detach(|| self.pool.install(|| on_world!(&self.world, q => batch::hit_lists(q, &rays, true))));
+        let m = lists.hits.len();
+        let mut ray_ids = Vec::with_capacity(m);
+        for (i, w) in lists.splits.windows(2).enumerate() {
+            ray_ids.extend(std::iter::repeat_n(i as u32, w[1] - w[0]));
+        }
+        let ids: Vec<(u32, u32)> = lists.hits.iter().map(|h| self.world.ids(h)).collect();
+        let uv: Vec<f32> = lists.hits.iter().flat_map(|h| [h.u, h.v]).collect();
+        Ok((
+            Array1::from_iter(lists.splits.iter().map(|&s| s as u64)).into_pyarray(py),
+            Array1::from(ray_ids).into_pyarray(py),
+            Array1::from_iter(lists.hits.iter().map(|h| h.t)).into_pyarray(py),
+            Array1::from_iter(ids.iter().map(|i| i.0)).into_pyarray(py),
+            Array1::from_iter(lists.hits.iter().map(|h| h.prim_id)).into_pyarray(py),
+            Array2::from_shape_vec((m, 2), uv).map_err(value_error)?.into_pyarray(py),
+            Array1::from_iter(ids.iter().map(|i| i.1)).into_pyarray(py),
+        ))
+    }
+
+    /// The surface point nearest to each of `(n, 3)` points: `(points (n, 3), distance,
+    /// geometry_ids, primitive_ids, primitive_uvs, primitive_normals, instance_ids)`. Points that
+    /// are not finite, and every point of an empty scene, get NaN points, infinite (NaN for
+    /// points that are not finite) distances and invalid ids.
+    #[allow(clippy::type_complexity)]
+    fn compute_closest_points<'py>(
+        &self,
+        py: Python<'py>,
+        points: PyReadonlyArray2<'py, f32>,
+    ) -> PyResult<(Arr2<'py, f32>, HitArrays<'py>)> {
+        let p = points_of(rows(&points, 3, "query points")?);
+        let found = py.detach(|| self.pool.install(|| on_world!(&self.world, q => batch::closest_points(q, &p))));
+        let n = p.len();
+        let mut cols = HitColumns::misses(n);
+        let mut at = vec![f32::NAN; 3 * n];
+        for (i, c) in found.iter().enumerate() {
+            let Some(c) = c else {
+                cols.t[i] = if p[i].is_finite() { f32::INFINITY } else { f32::NAN };
+                continue;
+            };
+            let (g, k) = self.world.ids(&Hit {
+                t: 0.0,
+                u: 0.0,
+                v: 0.0,
+                ng: c.ng,
+                prim_id: c.prim_id,
+                geom_id: c.geom_id,
+                inst_id: c.inst_id,
+            });
+            at[3 * i..3 * i + 3].copy_from_slice(&c.point.to_array());
+            cols.t[i] = c.distance;
+            (cols.geom[i], cols.prim[i], cols.inst[i]) = (g, c.prim_id, k);
+            cols.uv[2 * i..2 * i + 2].copy_from_slice(&[c.u, c.v]);
+            cols.normal[3 * i..3 * i + 3].copy_from_slice(&c.ng.normalize_or_zero().to_array());
+        }
+        Ok((Array2::from_shape_vec((n, 3), at).map_err(value_error)?.into_pyarray(py), cols.into_arrays(py)?))
+    }
+
+    /// Signed distance of each of `(n, 3)` points: negative inside.
+    fn compute_signed_distance<'py>(
+        &self,
+        py: Python<'py>,
+        points: PyReadonlyArray2<'py, f32>,
+    ) -> PyResult<Arr1<'py, f32>> {
+        let p = points_of(rows(&points, 3, "query points")?);
+        let d = py.detach(|| self.pool.install(|| on_world!(&self.world, q => batch::signed_distances(q, &p))));
+        Ok(Array1::from(d).into_pyarray(py))
+    }
+
+    /// Whether each of `(n, 3)` points lies inside the closed surface.
+    fn compute_occupancy<'py>(&self, py: Python<'py>, points: PyReadonlyArray2<'py, f32>) -> PyResult<Arr1<'py, bool>> {
+        let p = points_of(rows(&points, 3, "query points")?);
+        let d = py.detach(|| self.pool.install(|| on_world!(&self.world, q => batch::contains(q, &p))));
+        Ok(Array1::from(d).into_pyarray(py))
+    }
+}
+
+/// The `strahl._strahl` module.
+#[pymodule]
+fn _strahl(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<Core>()?;
+    m.add("INVALID_ID", INVALID_ID)?;
+    Ok(())
+}
