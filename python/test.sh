@@ -9,6 +9,6 @@ if [ ! -x "$venv/bin/python" ]; then
   python3 -m venv "$venv"
   "$venv/bin/pip" install -q --upgrade pip
 fi
-"$venv/bin/pip" install -q numpy pytest
+"$venv/bin/pip" install -q numpy pytest trimesh rtree
 "$venv/bin/pip" install -q ./python
 "$venv/bin/python" -m pytest -q python/tests "$@"
