@@ -395,10 +395,37 @@ impl Core {
     }
 }
 
+/// The triangle meshes of an OBJ file (one per object or group, polygons fanned into triangles),
+/// as `(vertices (n, 3) float32, triangles (m, 3) uint32)` pairs. A file that cannot be read is an
+/// `OSError`; a malformed one (the error names the line) a `ValueError`.
+#[pyfunction]
+fn load_obj<'py>(py: Python<'py>, path: std::path::PathBuf) -> PyResult<Vec<(Arr2<'py, f32>, Arr2<'py, u32>)>> {
+    let meshes = py.detach(|| strahl::load_obj(&path)).map_err(|e| match e {
+        strahl::Error::Io { cause, .. } => pyo3::exceptions::PyOSError::new_err((
+            cause.raw_os_error().unwrap_or(0),
+            cause.to_string(),
+            path.display().to_string(),
+        )),
+        e => value_error(e),
+    })?;
+    meshes
+        .iter()
+        .map(|m| {
+            let v: Vec<f32> = m.positions().iter().flat_map(|p| p.to_array()).collect();
+            let f: Vec<u32> = m.indices().iter().flatten().copied().collect();
+            Ok((
+                Array2::from_shape_vec((m.positions().len(), 3), v).map_err(value_error)?.into_pyarray(py),
+                Array2::from_shape_vec((m.indices().len(), 3), f).map_err(value_error)?.into_pyarray(py),
+            ))
+        })
+        .collect()
+}
+
 /// The `strahl._strahl` module.
 #[pymodule]
 fn _strahl(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Core>()?;
+    m.add_function(wrap_pyfunction!(load_obj, m)?)?;
     m.add("INVALID_ID", INVALID_ID)?;
     Ok(())
 }

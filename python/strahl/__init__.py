@@ -19,7 +19,7 @@ import numpy as np
 
 from . import _strahl
 
-__all__ = ["RaycastingScene", "INVALID_ID", "create_rays_pinhole"]
+__all__ = ["RaycastingScene", "INVALID_ID", "create_rays_pinhole", "load_obj"]
 
 #: The id of "no geometry / primitive / instance" in query results (Embree's and Open3D's).
 INVALID_ID: int = int(_strahl.INVALID_ID)
@@ -262,6 +262,23 @@ class RaycastingScene:
         self._geometries = list(state["geometries"])
         self._instances = list(state["instances"])
         self._instance_count = state["instance_count"]
+
+
+def load_obj(path: Any, merge: bool = True) -> Any:
+    """Triangle meshes of a Wavefront OBJ file, with strahl's loader (polygons fanned into
+    triangles, materials ignored). With ``merge`` (the default) one ``(vertices (n, 3) float32,
+    triangles (m, 3) uint32)`` pair for the whole file, else one pair per object or group.
+    A missing or unreadable file raises ``OSError``; a malformed one ``ValueError`` naming the
+    line."""
+    meshes = _strahl.load_obj(str(path))
+    if not merge:
+        return meshes
+    if not meshes:
+        return np.zeros((0, 3), np.float32), np.zeros((0, 3), np.uint32)
+    offsets = np.cumsum([0] + [len(v) for v, _ in meshes[:-1]])
+    v = np.concatenate([v for v, _ in meshes])
+    f = np.concatenate([f + np.uint32(o) for (_, f), o in zip(meshes, offsets)])
+    return v, f
 
 
 def _mesh_arrays(mesh: Any) -> Tuple[Any, Any]:

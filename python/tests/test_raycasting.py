@@ -400,3 +400,21 @@ def test_pinhole_rays():
     t = s.cast_rays(rays)["t_hit"]
     # The front face (z = 1, 4 from the eye) spans x in [-1, 1]: a quarter of the half-width.
     assert np.isfinite(t).sum() == 16 * 16
+
+
+def test_load_obj(tmp_path):
+    p = tmp_path / "quad.obj"
+    p.write_text("o a\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\no b\nv 0 0 1\nv 1 0 1\nv 0 1 1\nf -3 -2 -1\n")
+    v, f = strahl.load_obj(p)
+    assert v.shape == (7, 3) and f.shape == (3, 3) and v.dtype == np.float32 and f.dtype == np.uint32
+    parts = strahl.load_obj(p, merge=False)
+    assert [len(x[1]) for x in parts] == [2, 1]
+    s = scene_of((v, f))
+    t = s.cast_rays(np.array([[0.2, 0.3, 2, 0, 0, -1]], np.float32))["t_hit"]
+    np.testing.assert_allclose(t, [1.0])
+    with pytest.raises(OSError):
+        strahl.load_obj(tmp_path / "missing.obj")
+    bad = tmp_path / "bad.obj"
+    bad.write_text("v 0 0 0\nv 1 0\nf 1 2 3\n")
+    with pytest.raises(ValueError, match="line"):
+        strahl.load_obj(bad)
