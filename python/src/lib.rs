@@ -145,15 +145,17 @@ impl Core {
     /// geometry ids in list order. `placements`: `(geometry id, 4×4 row-major transform, instance
     /// id)` triples, or an empty list for a flat scene. `threads`: the pool's size (0: one per
     /// core). `watertight`: the watertight triangle test with the conservative box test, else
-    /// Möller–Trumbore with the fast box test.
+    /// Möller–Trumbore with the fast box test. `quality`: the build preset, by Embree's names
+    /// (`fast`, `medium`, `high`: spatial splits).
     #[new]
-    #[pyo3(signature = (geometries, placements, threads, watertight))]
+    #[pyo3(signature = (geometries, placements, threads, watertight, quality))]
     fn new(
         py: Python<'_>,
         geometries: Vec<(PyReadonlyArray2<'_, f32>, PyReadonlyArray2<'_, u32>)>,
         placements: Vec<(u32, PyReadonlyArray2<'_, f32>, u32)>,
         threads: usize,
         watertight: bool,
+        quality: &str,
     ) -> PyResult<Self> {
         let mut meshes = Vec::with_capacity(geometries.len());
         for (g, (v, f)) in geometries.iter().enumerate() {
@@ -182,7 +184,17 @@ impl Core {
             .thread_name(|i| format!("strahl-{i}"))
             .build()
             .map_err(|e| PyRuntimeError::new_err(format!("cannot start the thread pool: {e}")))?;
-        let cfg = if watertight { BuildConfig::watertight() } else { BuildConfig::default() };
+        let preset = match quality {
+            "fast" => BuildConfig::fast(),
+            "medium" => BuildConfig::default(),
+            "high" => BuildConfig::high(),
+            q => return Err(value_error(format!("quality must be \"fast\", \"medium\" or \"high\", got {q:?}"))),
+        };
+        let cfg = if watertight {
+            preset.with_tests(strahl::TriangleTest::Watertight, strahl::BoxTest::Conservative)
+        } else {
+            preset
+        };
         let flat = placements.is_empty();
         let world = py.detach(|| {
             pool.install(|| -> strahl::Result<World> {

@@ -50,13 +50,19 @@ class RaycastingScene:
             test, so no ray slips between the triangles of a closed mesh (the default, like
             Open3D's robust Embree scene); ``False`` picks Möller–Trumbore with the fast box
             test.
+        quality: the BVH build preset, by Embree's names: ``"fast"`` (fewer bins),
+            ``"medium"`` (binned SAH, the default) or ``"high"`` (spatial splits: slower to
+            build, faster to trace).
     """
 
     INVALID_ID: int = INVALID_ID
 
-    def __init__(self, threads: int = 0, watertight: bool = True) -> None:
+    def __init__(self, threads: int = 0, watertight: bool = True, quality: str = "medium") -> None:
         if not isinstance(threads, (int, np.integer)) or isinstance(threads, bool) or threads < 0:
             raise ValueError(f"threads must be a non-negative integer, got {threads!r}")
+        if quality not in ("fast", "medium", "high"):
+            raise ValueError(f'quality must be "fast", "medium" or "high", got {quality!r}')
+        self._quality = quality
         self._threads = int(threads)
         self._watertight = bool(watertight)
         self._geometries: List[Tuple[np.ndarray, np.ndarray]] = []
@@ -144,7 +150,7 @@ class RaycastingScene:
                             placements.append((g, np.eye(4, dtype=np.float32), INVALID_ID))
                         else:
                             placements.extend((g, m, i) for i, m in inst)
-                self._core = _strahl.Core(self._geometries, placements, self._threads, self._watertight)
+                self._core = _strahl.Core(self._geometries, placements, self._threads, self._watertight, self._quality)
             return self._core
 
     # -- ray queries --------------------------------------------------------------------------
@@ -252,13 +258,14 @@ class RaycastingScene:
             return {
                 "threads": self._threads,
                 "watertight": self._watertight,
+                "quality": self._quality,
                 "geometries": list(self._geometries),
                 "instances": list(self._instances),
                 "instance_count": self._instance_count,
             }
 
     def __setstate__(self, state: Dict[str, Any]) -> None:
-        self.__init__(state["threads"], state["watertight"])
+        self.__init__(state["threads"], state["watertight"], state.get("quality", "medium"))
         self._geometries = list(state["geometries"])
         self._instances = list(state["instances"])
         self._instance_count = state["instance_count"]
