@@ -1,0 +1,37 @@
+"""Type stubs of the extension module (python/src/lib.rs). Use the wrappers in ``strahl``."""
+
+from typing import List, Tuple
+
+import numpy as np
+import numpy.typing as npt
+
+INVALID_ID: int
+
+F32 = npt.NDArray[np.float32]
+U32 = npt.NDArray[np.uint32]
+HitArrays = Tuple[F32, U32, U32, F32, F32, U32]
+
+class Core:
+    def __init__(
+        self,
+        geometries: List[Tuple[F32, U32]],
+        placements: List[Tuple[int, F32, int]],
+        threads: int,
+        watertight: bool,
+        quality: str,
+    ) -> None: ...
+    @property
+    def threads(self) -> int: ...
+    @property
+    def triangles(self) -> int: ...
+    def cast_rays(self, rays: F32, tnear: float, tfar: float) -> HitArrays: ...
+    def test_occlusions(self, rays: F32, tnear: float, tfar: float) -> npt.NDArray[np.bool_]: ...
+    def count_intersections(self, rays: F32, tnear: float, tfar: float) -> U32: ...
+    def list_intersections(
+        self, rays: F32, tnear: float, tfar: float
+    ) -> Tuple[npt.NDArray[np.uint64], U32, F32, U32, U32, F32, U32]: ...
+    def compute_closest_points(self, points: F32) -> Tuple[F32, HitArrays]: ...
+    def compute_signed_distance(self, points: F32) -> F32: ...
+    def compute_occupancy(self, points: F32) -> npt.NDArray[np.bool_]: ...
+
+def load_obj(path: str) -> List[Tuple[F32, U32]]: ...
