@@ -62,7 +62,8 @@ def camera_rays(v: np.ndarray, name: str, w: int, h: int) -> np.ndarray:
     else:
         eye = c + np.linalg.norm(ext) * np.array([0.35, 0.25, 0.9])
         at, fov = c, 45
-    return strahl.create_rays_pinhole(fov, at, eye, [0, 1, 0], w, h).reshape(-1, 6)
+    # (h, w, 6), as Open3D's users hold camera rays: both engines get the image's shape.
+    return strahl.create_rays_pinhole(fov, at, eye, [0, 1, 0], w, h)
 
 
 def incoherent_rays(v: np.ndarray, n: int, seed: int = 1) -> np.ndarray:
@@ -176,8 +177,8 @@ def main() -> int:
             for kind, rays in sets.items():
                 rt = o3d.core.Tensor(rays)
                 ops += [
-                    (f"cast_rays {kind}", len(rays), lambda r=rays: ours.cast_rays(r), lambda r=rt: theirs.cast_rays(r, nthreads=nt)),
-                    (f"test_occlusions {kind}", len(rays), lambda r=rays: ours.test_occlusions(r),
+                    (f"cast_rays {kind}", rays.size // 6, lambda r=rays: ours.cast_rays(r), lambda r=rt: theirs.cast_rays(r, nthreads=nt)),
+                    (f"test_occlusions {kind}", rays.size // 6, lambda r=rays: ours.test_occlusions(r),
                      lambda r=rt: theirs.test_occlusions(r, nthreads=nt)),
                 ]
             ah = sets["incoherent"][: args.all_hits_rays]

@@ -48,6 +48,8 @@ macro_rules! on_world {
 struct Core {
     world: World,
     pool: rayon::ThreadPool,
+    /// The diagonal of the scene's box (0 for an empty scene).
+    size: f32,
 }
 
 fn value_error(e: impl std::fmt::Display) -> PyErr {
@@ -85,6 +87,94 @@ impl World {
 /// The rays of an `(n, 6)` array (origin, direction) over `(tnear, tfar]`.
 fn ray_of(r: &[f32], tnear: f32, tfar: f32) -> Ray {
     Ray::segment(Vec3::new(r[0], r[1], r[2]), Vec3::new(r[3], r[4], r[5]), tnear, tfar)
+}
+
+/// How `cast_rays` and `test_occlusions` cut their rays into parallel jobs, and order each job's
+/// rays for strahl's streams.
+///
+/// Rays of an image (`width > 0`) go in strips of 8 rows; a strip whose rays share one origin (a
+/// pinhole camera's) is traced in 4×4-tile order (`strahl::camera::tile_order`), so that each
+/// packet of 16 is a 4×4 tile and each group of four an 8×8 block walked under one frustum, and
+/// its answers are put back in row order. Open3D's `create_rays_pinhole` lists rays row by row:
+/// traced in that order, a packet would be a 16×1 strip with a frustum 16 times as wide as high.
+/// Other rays go in jobs of [`CHUNK`] in their own order, coherent when they share one origin.
+struct Jobs {
+    size: usize,
+    width: usize,
+    /// Tile order of a whole strip, as indices into the strip's rows.
+    strip_order: Vec<u32>,
+}
+
+impl Jobs {
+    fn of(n: usize, width: usize) -> Self {
+        if width >= 8 && n.is_multiple_of(width) && n > 0 {
+            let strip_order =
+                strahl::camera::tile_order(width as u32, 8).iter().map(|&(x, y)| y * width as u32 + x).collect();
+            Self { size: 8 * width, width, strip_order }
+        } else {
+            Self { size: CHUNK, width: 0, strip_order: Vec::new() }
+        }
+    }
+
+    /// One job's rays as a stream, the row index of each stream entry (if reordered), and how
+    /// coherent the rays are; `None` where the rays are better traced one by one: rays whose
+    /// origins scatter (see [`scattered`]).
+    fn stream(
+        &self,
+        r: &[f32],
+        tnear: f32,
+        tfar: f32,
+        scene_size: f32,
+    ) -> Option<(RayStream, Option<Vec<u32>>, Coherence)> {
+        let n = r.len() / 6;
+        let camera = one_origin(r);
+        if !camera && scattered(r, scene_size) {
+            return None;
+        }
+        let mut stream = RayStream::with_capacity(n);
+        let coherence = if camera { Coherence::Coherent } else { Coherence::Incoherent };
+        if camera && self.width > 0 {
+            let order = if n == self.size {
+                self.strip_order.clone()
+            } else {
+                let w = self.width as u32;
+                strahl::camera::tile_order(w, (n / self.width) as u32).iter().map(|&(x, y)| y * w + x).collect()
+            };
+            for &i in &order {
+                stream.push(&ray_of(&r[6 * i as usize..6 * i as usize + 6], tnear, tfar));
+            }
+            return Some((stream, Some(order), coherence));
+        }
+        for ray in r.chunks_exact(6) {
+            stream.push(&ray_of(ray, tnear, tfar));
+        }
+        Some((stream, None, coherence))
+    }
+}
+
+/// Whether the origins of runs of 16 consecutive rays spread, on average, over more than 2% of
+/// the scene's diagonal. strahl's incoherent streams trace rays as packets of 16 of one direction
+/// octant, which pays where neighbours start near each other (bounces off one patch of surface);
+/// for rays from anywhere in the scene in any direction, packets cost more than they share.
+/// Measured on one thread, 500,000 rays from uniform points in the scene's box in uniform
+/// directions (AMD EPYC Zen 3): Sponza 2.20 Mrays/s as a stream, 3.21 one by one; the bunny 4.30
+/// and 5.59 (`compare/examples/ray_file_speed.rs`).
+fn scattered(r: &[f32], scene_size: f32) -> bool {
+    let (mut sum, mut runs) = (0.0f32, 0usize);
+    for run in r.chunks(6 * 16) {
+        let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+        for ray in run.chunks_exact(6) {
+            let o = Vec3::new(ray[0], ray[1], ray[2]);
+            if o.is_finite() {
+                (lo, hi) = (lo.min(o), hi.max(o));
+            }
+        }
+        if lo.cmple(hi).all() {
+            sum += (hi - lo).length();
+            runs += 1;
+        }
+    }
+    runs > 0 && sum / runs as f32 > 0.02 * scene_size
 }
 
 /// Whether a chunk of rays is a camera's: one origin for all.
@@ -182,6 +272,11 @@ impl Core {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
             .thread_name(|i| format!("strahl-{i}"))
+            // Denormals flushed to zero on the pool's own threads (not the interpreter's), as
+            // the harness does for both engines: see `strahl::simd::set_flush_denormals`.
+            .start_handler(|_| {
+                strahl::simd::set_flush_denormals();
+            })
             .build()
             .map_err(|e| PyRuntimeError::new_err(format!("cannot start the thread pool: {e}")))?;
         let preset = match quality {
@@ -206,7 +301,13 @@ impl Core {
                 }
             })
         });
-        Ok(Self { world: world.map_err(value_error)?, pool })
+        let world = world.map_err(value_error)?;
+        let bounds = match &world {
+            World::Flat(s) => s.bounds(),
+            World::Instanced { scene, .. } => scene.bounds(),
+        };
+        let size = bounds.map_or(0.0, |(lo, hi)| (hi - lo).length());
+        Ok(Self { world, pool, size })
     }
 
     /// Threads of the scene's pool.
@@ -224,37 +325,49 @@ impl Core {
         }
     }
 
-    /// Closest hits of `(n, 6)` rays over `(tnear, tfar]`.
+    /// Closest hits of `(n, 6)` rays over `(tnear, tfar]`. `width`: the image width when the
+    /// rays are an image's rows (row-major, `n` a multiple of it), else 0 (see [`Jobs`]).
     fn cast_rays<'py>(
         &self,
         py: Python<'py>,
         rays: PyReadonlyArray2<'py, f32>,
         tnear: f32,
         tfar: f32,
+        width: usize,
     ) -> PyResult<HitArrays<'py>> {
         let r = rows(&rays, 6, "rays")?;
         let n = r.len() / 6;
+        let jobs = Jobs::of(n, width);
         let mut out = HitColumns::misses(n);
         py.detach(|| {
             self.pool.install(|| {
                 let HitColumns { t, geom, prim, uv, normal, inst } = &mut out;
+                let c = jobs.size;
                 (
-                    r.par_chunks(6 * CHUNK),
-                    (t.par_chunks_mut(CHUNK), geom.par_chunks_mut(CHUNK), prim.par_chunks_mut(CHUNK)),
-                    (uv.par_chunks_mut(2 * CHUNK), normal.par_chunks_mut(3 * CHUNK), inst.par_chunks_mut(CHUNK)),
+                    r.par_chunks(6 * c),
+                    (t.par_chunks_mut(c), geom.par_chunks_mut(c), prim.par_chunks_mut(c)),
+                    (uv.par_chunks_mut(2 * c), normal.par_chunks_mut(3 * c), inst.par_chunks_mut(c)),
                 )
                     .into_par_iter()
                     .with_max_len(1)
                     .for_each(|(r, (t, geom, prim), (uv, normal, inst))| {
-                        let mut stream = RayStream::with_capacity(t.len());
-                        for ray in r.chunks_exact(6) {
-                            stream.push(&ray_of(ray, tnear, tfar));
-                        }
-                        let coherence = if one_origin(r) { Coherence::Coherent } else { Coherence::Incoherent };
                         let mut hits = HitStream::misses(0);
-                        on_world!(&self.world, q => q.intersect_stream(&stream, &mut hits, coherence));
-                        for i in 0..t.len() {
-                            if let Some(h) = hits.get(i) {
+                        let order = match jobs.stream(r, tnear, tfar, self.size) {
+                            Some((stream, order, coherence)) => {
+                                on_world!(&self.world, q => q.intersect_stream(&stream, &mut hits, coherence));
+                                order
+                            }
+                            None => {
+                                hits.reset(t.len());
+                                for (k, ray) in r.chunks_exact(6).enumerate() {
+                                    hits.set(k, on_world!(&self.world, q => q.intersect(&ray_of(ray, tnear, tfar))));
+                                }
+                                None
+                            }
+                        };
+                        for k in 0..t.len() {
+                            let i = order.as_ref().map_or(k, |o| o[k] as usize);
+                            if let Some(h) = hits.get(k) {
                                 let (g, k) = self.world.ids(&h);
                                 t[i] = h.t;
                                 (geom[i], prim[i], inst[i]) = (g, h.prim_id, k);
@@ -268,27 +381,35 @@ impl Core {
         out.into_arrays(py)
     }
 
-    /// Whether anything lies on each of `(n, 6)` rays in `(tnear, tfar]`.
+    /// Whether anything lies on each of `(n, 6)` rays in `(tnear, tfar]` (`width` as for
+    /// [`cast_rays`](Self::cast_rays)).
     fn test_occlusions<'py>(
         &self,
         py: Python<'py>,
         rays: PyReadonlyArray2<'py, f32>,
         tnear: f32,
         tfar: f32,
+        width: usize,
     ) -> PyResult<Arr1<'py, bool>> {
         let r = rows(&rays, 6, "rays")?;
+        let jobs = Jobs::of(r.len() / 6, width);
         let mut out = vec![false; r.len() / 6];
         py.detach(|| {
             self.pool.install(|| {
-                out.par_chunks_mut(CHUNK).zip(r.par_chunks(6 * CHUNK)).with_max_len(1).for_each(|(o, r)| {
-                    let mut stream = RayStream::with_capacity(o.len());
-                    for ray in r.chunks_exact(6) {
-                        stream.push(&ray_of(ray, tnear, tfar));
-                    }
-                    let coherence = if one_origin(r) { Coherence::Coherent } else { Coherence::Incoherent };
+                let c = jobs.size;
+                out.par_chunks_mut(c).zip(r.par_chunks(6 * c)).with_max_len(1).for_each(|(o, r)| {
+                    let Some((stream, order, coherence)) = jobs.stream(r, tnear, tfar, self.size) else {
+                        for (o, ray) in o.iter_mut().zip(r.chunks_exact(6)) {
+                            *o = on_world!(&self.world, q => q.occluded(&ray_of(ray, tnear, tfar)));
+                        }
+                        return;
+                    };
                     let mut occ = Vec::new();
                     on_world!(&self.world, q => q.occluded_stream(&stream, &mut occ, coherence));
-                    o.copy_from_slice(&occ);
+                    match &order {
+                        Some(order) => order.iter().zip(&occ).for_each(|(&i, &b)| o[i as usize] = b),
+                        None => o.copy_from_slice(&occ),
+                    }
                 });
             })
         });

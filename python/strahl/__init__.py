@@ -164,7 +164,7 @@ class RaycastingScene:
         Rays with a NaN or zero direction miss.
         """
         r, lead = _float_rows(rays, 6, "rays")
-        t, g, p, uv, n, i = self._built().cast_rays(r, float(tnear), float(tfar))
+        t, g, p, uv, n, i = self._built().cast_rays(r, float(tnear), float(tfar), _width(lead))
         return {
             "t_hit": t.reshape(lead),
             "geometry_ids": g.reshape(lead),
@@ -177,7 +177,7 @@ class RaycastingScene:
     def test_occlusions(self, rays: Any, tnear: float = 0.0, tfar: float = float("inf"), nthreads: int = 0) -> np.ndarray:
         """Whether anything lies on each ray in ``(tnear, tfar]`` (bool, shape ``(...)``)."""
         r, lead = _float_rows(rays, 6, "rays")
-        return self._built().test_occlusions(r, float(tnear), float(tfar)).reshape(lead)
+        return self._built().test_occlusions(r, float(tnear), float(tfar), _width(lead)).reshape(lead)
 
     def count_intersections(self, rays: Any, tnear: float = 0.0, tfar: float = float("inf"), nthreads: int = 0) -> np.ndarray:
         """How many times each ray crosses the surface (int32, shape ``(...)``), in one walk.
@@ -286,6 +286,12 @@ def load_obj(path: Any, merge: bool = True) -> Any:
     v = np.concatenate([v for v, _ in meshes])
     f = np.concatenate([f + np.uint32(o) for (_, f), o in zip(meshes, offsets)])
     return v, f
+
+
+def _width(lead: Tuple[int, ...]) -> int:
+    """The image width of rays shaped ``(..., height, width, 6)`` (0 for a flat list): camera
+    rays of an image are traced in 4×4 tiles."""
+    return int(lead[-1]) if len(lead) >= 2 else 0
 
 
 def _mesh_arrays(mesh: Any) -> Tuple[Any, Any]:
