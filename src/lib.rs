@@ -33,6 +33,7 @@ pub mod camera;
 pub mod error;
 pub mod geometry;
 pub mod instance;
+mod persist;
 pub mod procedural;
 pub mod query;
 pub mod ray;

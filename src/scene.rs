@@ -51,6 +51,11 @@ pub struct Scene {
 }
 
 impl Scene {
+    /// A scene from its parts, checked by the caller (`persist`).
+    pub(crate) fn from_parts(meshes: Vec<TriangleMesh>, bvh: Bvh) -> Self {
+        Self { meshes, bvh }
+    }
+
     /// Builds the BVH over `meshes` on the current rayon pool. Geometry ids are indices into
     /// `meshes`. An empty list gives an empty scene that every ray misses.
     pub fn build(meshes: Vec<TriangleMesh>, config: &BuildConfig) -> Result<Self> {

@@ -52,6 +52,31 @@ struct Core {
     size: f32,
 }
 
+impl Core {
+    fn of(world: World, pool: rayon::ThreadPool) -> Self {
+        let bounds = match &world {
+            World::Flat(s) => s.bounds(),
+            World::Instanced { scene, .. } => scene.bounds(),
+        };
+        let size = bounds.map_or(0.0, |(lo, hi)| (hi - lo).length());
+        Self { world, pool, size }
+    }
+}
+
+/// A pool of `threads` threads (0: one per core).
+fn make_pool(threads: usize) -> PyResult<rayon::ThreadPool> {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .thread_name(|i| format!("strahl-{i}"))
+        // Denormals flushed to zero on the pool's own threads (not the interpreter's), as the
+        // harness does for both engines: see `strahl::simd::set_flush_denormals`.
+        .start_handler(|_| {
+            strahl::simd::set_flush_denormals();
+        })
+        .build()
+        .map_err(|e| PyRuntimeError::new_err(format!("cannot start the thread pool: {e}")))
+}
+
 fn value_error(e: impl std::fmt::Display) -> PyErr {
     PyValueError::new_err(e.to_string())
 }
@@ -269,16 +294,7 @@ impl Core {
             instances.push(Instance::new(*g as usize, t));
             ids.push((*g, *id));
         }
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .thread_name(|i| format!("strahl-{i}"))
-            // Denormals flushed to zero on the pool's own threads (not the interpreter's), as
-            // the harness does for both engines: see `strahl::simd::set_flush_denormals`.
-            .start_handler(|_| {
-                strahl::simd::set_flush_denormals();
-            })
-            .build()
-            .map_err(|e| PyRuntimeError::new_err(format!("cannot start the thread pool: {e}")))?;
+        let pool = make_pool(threads)?;
         let preset = match quality {
             "fast" => BuildConfig::fast(),
             "medium" => BuildConfig::default(),
@@ -301,13 +317,46 @@ impl Core {
                 }
             })
         });
+        Ok(Self::of(world.map_err(value_error)?, pool))
+    }
+
+    /// The built scene as bytes, for pickling: `(instanced, bytes, instance ids)`; see
+    /// `strahl::Scene::to_bytes`.
+    fn serialize<'py>(&self, py: Python<'py>) -> (bool, Bound<'py, pyo3::types::PyBytes>, Vec<(u32, u32)>) {
+        match &self.world {
+            World::Flat(s) => (false, pyo3::types::PyBytes::new(py, &s.to_bytes()), Vec::new()),
+            World::Instanced { scene, ids } => (true, pyo3::types::PyBytes::new(py, &scene.to_bytes()), ids.clone()),
+        }
+    }
+
+    /// A scene from [`serialize`](Self::serialize)'s parts, without rebuilding its BVHs (a
+    /// two-level scene rebuilds its top level); bytes that are not such a scene are a
+    /// `ValueError`.
+    #[staticmethod]
+    fn deserialize(
+        py: Python<'_>,
+        instanced: bool,
+        bytes: &[u8],
+        ids: Vec<(u32, u32)>,
+        threads: usize,
+    ) -> PyResult<Self> {
+        let pool = make_pool(threads)?;
+        let world = py.detach(|| {
+            pool.install(|| -> strahl::Result<World> {
+                Ok(if instanced {
+                    World::Instanced { scene: InstancedScene::from_bytes(bytes)?, ids }
+                } else {
+                    World::Flat(Scene::from_bytes(bytes)?)
+                })
+            })
+        });
         let world = world.map_err(value_error)?;
-        let bounds = match &world {
-            World::Flat(s) => s.bounds(),
-            World::Instanced { scene, .. } => scene.bounds(),
-        };
-        let size = bounds.map_or(0.0, |(lo, hi)| (hi - lo).length());
-        Ok(Self { world, pool, size })
+        if let World::Instanced { scene, ids } = &world
+            && scene.instances().len() != ids.len()
+        {
+            return Err(value_error(format!("{} instance ids for {} instances", ids.len(), scene.instances().len())));
+        }
+        Ok(Self::of(world, pool))
     }
 
     /// Threads of the scene's pool.

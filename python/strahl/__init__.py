@@ -254,8 +254,10 @@ class RaycastingScene:
         return self._built().threads
 
     def __getstate__(self) -> Dict[str, Any]:
+        """The geometry, and the built BVH if the scene has been built (so that unpickling does
+        not build it again: a two-level scene rebuilds only its top level)."""
         with self._lock:
-            return {
+            state = {
                 "threads": self._threads,
                 "watertight": self._watertight,
                 "quality": self._quality,
@@ -263,12 +265,18 @@ class RaycastingScene:
                 "instances": list(self._instances),
                 "instance_count": self._instance_count,
             }
+            if self._core is not None:
+                state["built"] = self._core.serialize()
+            return state
 
     def __setstate__(self, state: Dict[str, Any]) -> None:
         self.__init__(state["threads"], state["watertight"], state.get("quality", "medium"))
         self._geometries = list(state["geometries"])
         self._instances = list(state["instances"])
         self._instance_count = state["instance_count"]
+        if "built" in state:
+            instanced, data, ids = state["built"]
+            self._core = _strahl.Core.deserialize(instanced, data, ids, self._threads)
 
 
 def load_obj(path: Any, merge: bool = True) -> Any:

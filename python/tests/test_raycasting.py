@@ -318,6 +318,10 @@ def test_bad_input_raises_clear_errors():
     with pytest.raises(ValueError):
         strahl.RaycastingScene(threads=-1)
     with pytest.raises(ValueError):
+        strahl.RaycastingScene(threads=1.5)
+    with pytest.raises(ValueError, match="quality"):
+        strahl.RaycastingScene(quality="ultra")
+    with pytest.raises(ValueError):
         strahl.create_rays_pinhole(90, [0, 0, 0], [0, 0, 0], [0, 1, 0], 4, 4)
     # NaN and zero-direction rays miss; NaN vertices and points have defined answers.
     bad = np.array([[0, 0, 0, 0, 0, 0], [np.nan, 0, 0, 0, 0, 1], [0, 0, 0, np.nan, 0, 1]], np.float32)
@@ -340,9 +344,25 @@ def test_pickle_round_trip():
     rays = random_rays(16, 500)
     before = s.cast_rays(rays)
     s2 = pickle.loads(pickle.dumps(s))
+    assert s2._core is not None, "the built BVH travels with the pickle"
     after = s2.cast_rays(rays)
     for k in before:
         np.testing.assert_array_equal(before[k], after[k])
+    flat = scene_of((v, f), watertight=False)
+    flat.cast_rays(rays[:1])
+    flat2 = pickle.loads(pickle.dumps(flat))
+    np.testing.assert_array_equal(flat2.cast_rays(rays)["t_hit"], flat.cast_rays(rays)["t_hit"])
+    # An unbuilt scene pickles its geometry only.
+    fresh = pickle.loads(pickle.dumps(scene_of((v, f))))
+    assert fresh._core is None
+    np.testing.assert_array_equal(fresh.cast_rays(rays)["t_hit"], scene_of((v, f)).cast_rays(rays)["t_hit"])
+    # Bytes that are not a scene are refused, whatever they hold.
+    instanced, data, ids = s._core.serialize()
+    for bad in (b"", b"garbage", data[: len(data) // 2], data + b"\0"):
+        with pytest.raises(ValueError):
+            strahl._strahl.Core.deserialize(instanced, bad, ids, 1)
+    with pytest.raises(ValueError):
+        strahl._strahl.Core.deserialize(instanced, data, ids[:-1], 1)
 
 
 def test_threads_agree_and_python_threads_may_share_a_scene():

@@ -1,0 +1,481 @@
+//! A built [`Scene`] as bytes and back, without a rebuild: its meshes, nodes and triangle blocks
+//! as they are, little-endian. What the Python package pickles, and what a program that traces
+//! one scene many times may keep on disk.
+//!
+//! Loading trusts nothing: every count is checked against the bytes left before anything is
+//! allocated, the meshes are checked as [`TriangleMesh::new`] checks them, and the tree is walked
+//! once to make sure every child reference lies in its array, no node is reached twice (so no walk
+//! can loop) and no path is deeper than a built tree can be (so the fixed traversal stack is never
+//! outgrown). Bytes that fail any check are [`Error::Serialized`]; none can make a query panic,
+//! hang or read out of bounds.
+
+use glam::{Affine3A, Vec3};
+
+use crate::bvh::build::MEDIAN_DEPTH;
+use crate::bvh::node::{EMPTY, Node, WIDTH, is_leaf, leaf_blocks};
+use crate::bvh::{BoxTest, BuildStats, Bvh};
+use crate::error::{Error, Result};
+use crate::geometry::TriangleMesh;
+use crate::geometry::TriangleTest;
+use crate::geometry::triangle::{BLOCK, TriBlock};
+use crate::instance::{Instance, InstancedScene};
+use crate::scene::Scene;
+
+/// The first bytes of a serialized scene.
+const MAGIC: &[u8; 8] = b"STRAHLSC";
+/// Format version; bumped whenever the layout of nodes, blocks or this format changes.
+const VERSION: u32 = 1;
+/// Deepest wide level a built tree reaches (`MEDIAN_DEPTH` SAH levels, then at most 32 median
+/// levels), which the traversal stack is sized for.
+const MAX_DEPTH: usize = MEDIAN_DEPTH + 33;
+
+impl Scene {
+    /// The built scene as bytes ([`from_bytes`](Self::from_bytes) reads them back without a
+    /// rebuild). The layout is strahl's own and versioned; it is meant for the same version of
+    /// strahl, on machines of the same byte order.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let bvh = self.bvh();
+        let mut w = Writer(Vec::with_capacity(64 + bvh.stats.bytes + self.meshes().len() * 64));
+        w.0.extend_from_slice(MAGIC);
+        w.u32(VERSION);
+        w.u8(test_code(bvh.test));
+        w.u8((bvh.box_test == BoxTest::Conservative) as u8);
+        w.u8(bvh.prefetch as u8);
+        w.u64(self.meshes().len() as u64);
+        for m in self.meshes() {
+            w.u64(m.name.len() as u64);
+            w.0.extend_from_slice(m.name.as_bytes());
+            w.u64(m.positions().len() as u64);
+            m.positions().iter().for_each(|p| p.to_array().iter().for_each(|&x| w.f32(x)));
+            w.u64(m.indices().len() as u64);
+            m.indices().iter().flatten().for_each(|&i| w.u32(i));
+        }
+        w.u32(bvh.root);
+        w.u64(bvh.nodes.len() as u64);
+        for n in &bvh.nodes {
+            n.bounds.iter().flatten().for_each(|&x| w.f32(x));
+            n.child.iter().for_each(|&c| w.u32(c));
+        }
+        w.u64(bvh.blocks.len() as u64);
+        for b in &bvh.blocks {
+            b.rows.iter().flatten().for_each(|&x| w.f32(x));
+            b.geom.iter().chain(&b.prim).for_each(|&x| w.u32(x));
+        }
+        match bvh.bounds {
+            Some((lo, hi)) => {
+                w.u8(1);
+                lo.to_array().iter().chain(&hi.to_array()).for_each(|&x| w.f32(x));
+            }
+            None => w.u8(0),
+        }
+        let s = &bvh.stats;
+        w.f64(s.build_ms);
+        for x in [s.triangles, s.skipped_triangles, s.inner_nodes, s.leaves, s.blocks, s.references] {
+            w.u64(x as u64);
+        }
+        w.f64(s.sah);
+        w.u64(s.bytes as u64);
+        w.f64(s.bytes_per_triangle);
+        w.u64(s.depth as u64);
+        w.0
+    }
+
+    /// A scene from the bytes of [`to_bytes`](Self::to_bytes), checked (see the module's
+    /// documentation); [`Error::Serialized`] says what is wrong with bytes that are not such a
+    /// scene.
+    pub fn from_bytes(bytes: &[u8]) -> Result<Scene> {
+        let mut r = Reader { b: bytes };
+        if r.take(8)? != MAGIC {
+            return Err(bad("not a serialized strahl scene (no STRAHLSC header)"));
+        }
+        let version = r.u32()?;
+        if version != VERSION {
+            return Err(bad(format!("format version {version}; this strahl reads version {VERSION}")));
+        }
+        let test = match r.u8()? {
+            0 => TriangleTest::MollerTrumbore,
+            1 => TriangleTest::Badouel,
+            2 => TriangleTest::Watertight,
+            t => return Err(bad(format!("unknown triangle test {t}"))),
+        };
+        let box_test = if r.u8()? != 0 { BoxTest::Conservative } else { BoxTest::Fast };
+        let prefetch = r.u8()? != 0;
+        let mesh_count = r.count(24)?;
+        let mut meshes = Vec::with_capacity(mesh_count);
+        for _ in 0..mesh_count {
+            let len = r.count(1)?;
+            let name = String::from_utf8(r.take(len)?.to_vec()).map_err(|_| bad("a mesh name is not UTF-8"))?;
+            let n = r.count(12)?;
+            let positions = (0..n).map(|_| Ok(Vec3::new(r.f32()?, r.f32()?, r.f32()?))).collect::<Result<Vec<_>>>()?;
+            let m = r.count(12)?;
+            let indices = (0..m).map(|_| Ok([r.u32()?, r.u32()?, r.u32()?])).collect::<Result<Vec<_>>>()?;
+            meshes.push(TriangleMesh::new(name, positions, indices)?);
+        }
+        let root = r.u32()?;
+        let node_count = r.count(4 * (6 * WIDTH + WIDTH))?;
+        let mut nodes = Vec::with_capacity(node_count);
+        for _ in 0..node_count {
+            let mut n = Node::default();
+            for row in n.bounds.iter_mut() {
+                for x in row.iter_mut() {
+                    *x = r.f32()?;
+                }
+            }
+            for c in n.child.iter_mut() {
+                *c = r.u32()?;
+            }
+            nodes.push(n);
+        }
+        let block_count = r.count(4 * (9 * BLOCK + 2 * BLOCK))?;
+        let mut blocks = Vec::with_capacity(block_count);
+        for _ in 0..block_count {
+            let mut rows = [[0.0; BLOCK]; 9];
+            for row in rows.iter_mut() {
+                for x in row.iter_mut() {
+                    *x = r.f32()?;
+                }
+            }
+            let mut ids = [0u32; 2 * BLOCK];
+            for x in ids.iter_mut() {
+                *x = r.u32()?;
+            }
+            let (geom, prim) =
+                (ids[..BLOCK].try_into().expect("BLOCK ids"), ids[BLOCK..].try_into().expect("BLOCK ids"));
+            blocks.push(TriBlock { rows, geom, prim });
+        }
+        let bounds = match r.u8()? {
+            0 => None,
+            _ => {
+                let v: Vec<f32> = (0..6).map(|_| r.f32()).collect::<Result<_>>()?;
+                Some((Vec3::new(v[0], v[1], v[2]), Vec3::new(v[3], v[4], v[5])))
+            }
+        };
+        let build_ms = r.f64()?;
+        let mut counts = [0usize; 6];
+        for c in counts.iter_mut() {
+            *c = r.u64()? as usize;
+        }
+        let [triangles, skipped_triangles, inner_nodes, leaves, blocks_stat, references] = counts;
+        let stats = BuildStats {
+            build_ms,
+            triangles,
+            skipped_triangles,
+            inner_nodes,
+            leaves,
+            blocks: blocks_stat,
+            references,
+            sah: r.f64()?,
+            bytes: r.u64()? as usize,
+            bytes_per_triangle: r.f64()?,
+            depth: r.u64()? as usize,
+        };
+        if !r.b.is_empty() {
+            return Err(bad(format!("{} bytes after the scene", r.b.len())));
+        }
+        check_tree(&nodes, blocks.len(), root)?;
+        check_blocks(&blocks, test, &meshes)?;
+        let bvh = Bvh { nodes, blocks, root, bounds, test, box_test, stats, prefetch };
+        Ok(Scene::from_parts(meshes, bvh))
+    }
+}
+
+/// The first bytes of a serialized two-level scene.
+const MAGIC_INSTANCED: &[u8; 8] = b"STRAHLIN";
+
+impl InstancedScene {
+    /// The scene as bytes: each object's built BVH (as [`Scene::to_bytes`]) and the instances.
+    /// [`from_bytes`](Self::from_bytes) rebuilds only the top level, one box per instance.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut w = Writer(Vec::new());
+        w.0.extend_from_slice(MAGIC_INSTANCED);
+        w.u32(VERSION);
+        w.u64(self.objects().len() as u64);
+        for o in self.objects() {
+            let b = o.to_bytes();
+            w.u64(b.len() as u64);
+            w.0.extend_from_slice(&b);
+        }
+        w.u64(self.instances().len() as u64);
+        for inst in self.instances() {
+            w.u64(inst.object as u64);
+            inst.transform.to_cols_array().iter().for_each(|&x| w.f32(x));
+        }
+        w.0
+    }
+
+    /// A two-level scene from the bytes of [`to_bytes`](Self::to_bytes): the objects loaded as
+    /// [`Scene::from_bytes`] loads them, the top level built anew; errors as there, and as
+    /// [`from_scenes`](Self::from_scenes) gives them for the instances.
+    pub fn from_bytes(bytes: &[u8]) -> Result<InstancedScene> {
+        let mut r = Reader { b: bytes };
+        if r.take(8)? != MAGIC_INSTANCED {
+            return Err(bad("not a serialized strahl two-level scene (no STRAHLIN header)"));
+        }
+        let version = r.u32()?;
+        if version != VERSION {
+            return Err(bad(format!("format version {version}; this strahl reads version {VERSION}")));
+        }
+        let n = r.count(8)?;
+        let mut objects = Vec::with_capacity(n);
+        for _ in 0..n {
+            let len = r.count(1)?;
+            objects.push(Scene::from_bytes(r.take(len)?)?);
+        }
+        let k = r.count(8 + 12 * 4)?;
+        let mut instances = Vec::with_capacity(k);
+        for _ in 0..k {
+            let object = r.u64()?;
+            let mut m = [0.0f32; 12];
+            for x in m.iter_mut() {
+                *x = r.f32()?;
+            }
+            let object = usize::try_from(object).map_err(|_| bad("an instance's object index overflows"))?;
+            instances.push(Instance::new(object, Affine3A::from_cols_array(&m)));
+        }
+        if !r.b.is_empty() {
+            return Err(bad(format!("{} bytes after the scene", r.b.len())));
+        }
+        InstancedScene::from_scenes(objects, instances)
+    }
+}
+
+fn bad(message: impl Into<String>) -> Error {
+    Error::Serialized(message.into())
+}
+
+fn test_code(t: TriangleTest) -> u8 {
+    match t {
+        TriangleTest::MollerTrumbore => 0,
+        TriangleTest::Badouel => 1,
+        TriangleTest::Watertight => 2,
+    }
+}
+
+/// Every child reference in range, every node reached once from the root, no path deeper than
+/// [`MAX_DEPTH`] wide levels.
+fn check_tree(nodes: &[Node], blocks: usize, root: u32) -> Result<()> {
+    let leaf_ok = |r: u32| {
+        let (start, count) = leaf_blocks(r);
+        start.checked_add(count).is_some_and(|end| end <= blocks)
+    };
+    if root == EMPTY {
+        return Ok(());
+    }
+    let mut seen = vec![false; nodes.len()];
+    let mut stack = vec![(root, 1usize)];
+    while let Some((r, depth)) = stack.pop() {
+        if is_leaf(r) {
+            if !leaf_ok(r) {
+                return Err(bad(format!("a leaf names blocks beyond the {blocks} there are")));
+            }
+            continue;
+        }
+        let i = r as usize;
+        if i >= nodes.len() {
+            return Err(bad(format!("a child reference ({i}) beyond the {} nodes", nodes.len())));
+        }
+        if std::mem::replace(&mut seen[i], true) {
+            return Err(bad(format!("node {i} is reached twice")));
+        }
+        if depth > MAX_DEPTH {
+            return Err(bad(format!("the tree is deeper than {MAX_DEPTH} levels")));
+        }
+        stack.extend(nodes[i].child.iter().filter(|&&c| c != EMPTY).map(|&c| (c, depth + 1)));
+    }
+    Ok(())
+}
+
+/// Every used lane of every block names a triangle of a mesh.
+fn check_blocks(blocks: &[TriBlock], test: TriangleTest, meshes: &[TriangleMesh]) -> Result<()> {
+    for (bi, b) in blocks.iter().enumerate() {
+        for lane in 0..BLOCK {
+            if b.prim[lane] == u32::MAX {
+                continue;
+            }
+            let g = b.geom_id(test, lane) as usize;
+            if meshes.get(g).is_none_or(|m| b.prim[lane] as usize >= m.triangle_count()) {
+                return Err(bad(format!(
+                    "block {bi} names triangle {} of geometry {g}, which does not exist",
+                    b.prim[lane]
+                )));
+            }
+        }
+    }
+    Ok(())
+}
+
+struct Writer(Vec<u8>);
+
+impl Writer {
+    fn u8(&mut self, x: u8) {
+        self.0.push(x);
+    }
+    fn u32(&mut self, x: u32) {
+        self.0.extend_from_slice(&x.to_le_bytes());
+    }
+    fn u64(&mut self, x: u64) {
+        self.0.extend_from_slice(&x.to_le_bytes());
+    }
+    fn f32(&mut self, x: f32) {
+        self.0.extend_from_slice(&x.to_le_bytes());
+    }
+    fn f64(&mut self, x: f64) {
+        self.0.extend_from_slice(&x.to_le_bytes());
+    }
+}
+
+struct Reader<'a> {
+    b: &'a [u8],
+}
+
+impl<'a> Reader<'a> {
+    fn take(&mut self, n: usize) -> Result<&'a [u8]> {
+        if n > self.b.len() {
+            return Err(bad("cut off: fewer bytes than the scene needs"));
+        }
+        let (head, rest) = self.b.split_at(n);
+        self.b = rest;
+        Ok(head)
+    }
+    fn array<const N: usize>(&mut self) -> Result<[u8; N]> {
+        Ok(self.take(N)?.try_into().expect("N bytes"))
+    }
+    fn u8(&mut self) -> Result<u8> {
+        Ok(self.take(1)?[0])
+    }
+    fn u32(&mut self) -> Result<u32> {
+        Ok(u32::from_le_bytes(self.array()?))
+    }
+    fn u64(&mut self) -> Result<u64> {
+        Ok(u64::from_le_bytes(self.array()?))
+    }
+    fn f32(&mut self) -> Result<f32> {
+        Ok(f32::from_le_bytes(self.array()?))
+    }
+    fn f64(&mut self) -> Result<f64> {
+        Ok(f64::from_le_bytes(self.array()?))
+    }
+    /// A count of items of at least `min_size` bytes each, refused if the bytes left cannot hold
+    /// them (so a corrupt count never allocates).
+    fn count(&mut self, min_size: usize) -> Result<usize> {
+        let n = self.u64()?;
+        if n.saturating_mul(min_size as u64) > self.b.len() as u64 {
+            return Err(bad(format!("a count of {n} items does not fit the {} bytes left", self.b.len())));
+        }
+        Ok(n as usize)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bvh::BuildConfig;
+    use crate::procedural::{sphereflake, uv_sphere};
+    use crate::ray::Ray;
+    use crate::scene::Query;
+
+    #[test]
+    fn round_trip_answers_alike_and_corruption_is_refused() {
+        let meshes = vec![sphereflake(1, 8, 16), uv_sphere(Vec3::new(3.0, 0.0, 0.0), 1.0, 8, 16)];
+        for cfg in [BuildConfig::default(), BuildConfig::watertight(), BuildConfig::high()] {
+            let scene = Scene::build(meshes.clone(), &cfg).unwrap();
+            let bytes = scene.to_bytes();
+            let back = Scene::from_bytes(&bytes).unwrap();
+            assert_eq!(back.meshes(), scene.meshes());
+            assert_eq!(back.stats(), scene.stats());
+            for i in 0..200 {
+                let a = i as f32 * 0.031;
+                let ray = Ray::new(Vec3::new(5.0 * a.cos(), 1.0, 5.0 * a.sin()), Vec3::new(-a.cos(), -0.2, -a.sin()));
+                assert_eq!(scene.intersect(&ray), back.intersect(&ray));
+            }
+            // Every cut is refused; so are flipped bytes that break a check (others may load as
+            // another valid scene, which is fine: queries on it stay defined).
+            for cut in [0, 7, 12, bytes.len() / 2, bytes.len() - 1] {
+                assert!(Scene::from_bytes(&bytes[..cut]).is_err(), "cut at {cut}");
+            }
+            let mut extra = bytes.clone();
+            extra.push(0);
+            assert!(Scene::from_bytes(&extra).is_err());
+        }
+        let empty = Scene::build(vec![], &BuildConfig::default()).unwrap();
+        assert!(Scene::from_bytes(&empty.to_bytes()).unwrap().intersect(&Ray::new(Vec3::ZERO, Vec3::X)).is_none());
+    }
+
+    /// Single flipped bytes anywhere: refused, or a scene whose queries still answer (no panic,
+    /// no hang).
+    #[test]
+    fn flipped_bytes_never_break_a_query() {
+        let scene = Scene::build(vec![uv_sphere(Vec3::ZERO, 1.0, 6, 12)], &BuildConfig::watertight()).unwrap();
+        let bytes = scene.to_bytes();
+        let mut rng = crate::raygen::Pcg32::new(3, 5);
+        let (mut refused, mut loaded) = (0, 0);
+        for _ in 0..3000 {
+            let mut b = bytes.clone();
+            let at = (rng.next_f32() * b.len() as f32) as usize % b.len();
+            b[at] ^= 1 << ((rng.next_f32() * 8.0) as u32 % 8);
+            match Scene::from_bytes(&b) {
+                Err(_) => refused += 1,
+                Ok(s) => {
+                    loaded += 1;
+                    for k in 0..8 {
+                        let a = k as f32;
+                        let ray =
+                            Ray::new(Vec3::new(a.cos() * 3.0, 0.3, a.sin() * 3.0), Vec3::new(-a.cos(), 0.0, -a.sin()));
+                        let _ = (s.intersect(&ray), s.occluded(&ray));
+                    }
+                }
+            }
+        }
+        assert!(refused > 0 && loaded > 0, "{refused} refused, {loaded} loaded");
+    }
+
+    #[test]
+    fn instanced_round_trip() {
+        let objects = vec![vec![uv_sphere(Vec3::ZERO, 1.0, 8, 16)]];
+        let instances = (0..5)
+            .map(|i| {
+                Instance::new(
+                    0,
+                    Affine3A::from_scale_rotation_translation(
+                        Vec3::splat(0.5 + i as f32 * 0.1),
+                        glam::Quat::from_rotation_y(i as f32),
+                        Vec3::new(3.0 * i as f32, 0.0, 0.0),
+                    ),
+                )
+            })
+            .collect();
+        let scene = InstancedScene::build(objects, instances, &BuildConfig::watertight()).unwrap();
+        let back = InstancedScene::from_bytes(&scene.to_bytes()).unwrap();
+        assert_eq!(back.instances(), scene.instances());
+        for i in 0..100 {
+            let ray = Ray::new(Vec3::new(i as f32 * 0.13, 5.0, 0.1), Vec3::new(0.0, -1.0, 0.05));
+            assert_eq!(scene.intersect(&ray), back.intersect(&ray));
+        }
+        assert!(InstancedScene::from_bytes(&scene.to_bytes()[..40]).is_err());
+        assert!(Scene::from_bytes(&scene.to_bytes()).is_err());
+    }
+
+    #[test]
+    fn cycles_and_references_out_of_range_are_refused() {
+        let mut n = Node::default();
+        n.child[0] = 0; // itself
+        assert!(check_tree(&[n], 0, 0).is_err());
+        let mut n = Node::default();
+        n.child[0] = 5;
+        assert!(check_tree(&[n], 0, 0).is_err());
+        n.child[0] = crate::bvh::node::leaf_ref(0, 2);
+        assert!(check_tree(&[n], 1, 0).is_err());
+        assert!(check_tree(&[n], 2, 0).is_ok());
+        // A chain deeper than any build.
+        let chain: Vec<Node> = (0..MAX_DEPTH as u32 + 2)
+            .map(|i| {
+                let mut n = Node::default();
+                n.child[0] = i + 1;
+                n
+            })
+            .collect();
+        let mut chain = chain;
+        chain.last_mut().unwrap().child[0] = EMPTY;
+        assert!(check_tree(&chain, 0, 0).is_err());
+    }
+}
