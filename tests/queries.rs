@@ -273,3 +273,56 @@ fn batch_hit_lists_agree_with_single_queries() {
     }
     assert!(lists.hits.len() > 1000);
 }
+
+/// The generalized winding number of a closed mesh at `p` (Jacobson et al. 2013): the sum of the
+/// triangles' signed solid angles (Van Oosterom–Strackee) over 4π, in float64.
+fn winding_number(meshes: &[TriangleMesh], p: Vec3) -> f64 {
+    let p = p.as_dvec3();
+    let mut sum = 0.0;
+    for m in meshes {
+        for i in 0..m.triangle_count() {
+            let [a, b, c] = m.triangle(i).map(|v| v.as_dvec3() - p);
+            let (la, lb, lc) = (a.length(), b.length(), c.length());
+            let det = a.dot(b.cross(c));
+            let den = la * lb * lc + a.dot(b) * lc + b.dot(c) * la + c.dot(a) * lb;
+            sum += det.atan2(den);
+        }
+    }
+    sum / (2.0 * std::f64::consts::PI)
+}
+
+/// The shared scenes' one closed mesh, Igea (when present): inside/outside by crossing parity
+/// against generalized winding numbers, for points near the surface and far from it.
+#[test]
+fn inside_test_agrees_with_winding_numbers_on_igea() {
+    let Some(path) = common::shared_scene("igea/igea.obj") else {
+        eprintln!("../shared/scenes/igea not present: skipped");
+        return;
+    };
+    let meshes = strahl::load_obj(path).unwrap();
+    let scene = Scene::build(meshes.clone(), &BuildConfig::watertight()).unwrap();
+    let (lo, hi) = scene.bounds().unwrap();
+    let mut rng = Pcg32::new(17, 2);
+    let mut points: Vec<Vec3> = (0..150).map(|_| lo + (hi - lo) * rng_vec(&mut rng, 0.0, 1.0)).collect();
+    // Near the surface: triangle centres moved off by 0.1% of the diagonal, either way.
+    let m = &meshes[0];
+    let step = (hi - lo).length() * 1e-3;
+    for k in 0..150 {
+        let i = (rng.next_f32() * m.triangle_count() as f32) as usize % m.triangle_count();
+        let [a, b, c] = m.triangle(i);
+        let n = (b - a).cross(c - a).normalize_or_zero();
+        let side = if k % 2 == 0 { 1.0 } else { -1.0 };
+        points.push((a + b + c) / 3.0 + n * step * side);
+    }
+    let inside = batch::contains(&scene, &points);
+    let (mut wrong, mut n_in) = (0, 0);
+    for (p, &got) in points.iter().zip(&inside) {
+        let w = winding_number(&meshes, *p);
+        assert!(!(0.1..0.9).contains(&w), "Igea is closed: winding numbers are 0 or 1, got {w} at {p}");
+        let want = w > 0.5;
+        n_in += want as usize;
+        wrong += (got != want) as usize;
+    }
+    assert_eq!(wrong, 0, "{wrong} of {} points on the wrong side", points.len());
+    assert!(n_in > 50, "{n_in} points inside");
+}

@@ -162,6 +162,7 @@ def main() -> int:
     ap.add_argument("--incoherent", type=int, default=500_000)
     ap.add_argument("--points", type=int, default=100_000)
     ap.add_argument("--all-hits-rays", type=int, default=100_000)
+    ap.add_argument("--contains-points", type=int, default=20_000, help="points for trimesh's contains_points")
     ap.add_argument("--sign-points", type=int, default=2000, help="points checked against winding numbers (closed meshes)")
     ap.add_argument("--out", type=Path)
     args = ap.parse_args()
@@ -265,7 +266,10 @@ def main() -> int:
             EmbreexMesh(es, v[f])
             o32, d32 = np.ascontiguousarray(o, np.float32), np.ascontiguousarray(d, np.float32)
             tm_ops.append(("embreex run (closest hit)", lambda: mine.intersects_first(o, d), lambda: es.run(o32, d32)))
+            cp = pts[: args.contains_points].astype(np.float64)
+            tm_ops.append(("contains_points", lambda: mine.contains_points(cp), lambda: ref.contains_points(cp)))
             for op, a, b in tm_ops:
+                n_op = len(cp) if op == "contains_points" else len(o)
                 a(), b()
                 times = {}
                 for _ in range(args.passes):
@@ -274,8 +278,8 @@ def main() -> int:
                 lo, hi = spread(times["strahl"], times["other"])
                 row = {
                     "scene": name, "threads": 2, "op": op, "other": "trimesh+embreex" if "embreex run" not in op else "embreex",
-                    "n": len(o), "strahl_mqps": len(o) / median(times["strahl"]) / 1e6,
-                    "other_mqps": len(o) / median(times["other"]) / 1e6,
+                    "n": n_op, "strahl_mqps": n_op / median(times["strahl"]) / 1e6,
+                    "other_mqps": n_op / median(times["other"]) / 1e6,
                     "ratio": median(times["other"]) / median(times["strahl"]), "q1": lo, "q3": hi,
                 }
                 rows.append(row)
@@ -311,6 +315,10 @@ def main() -> int:
             sb = theirs.compute_signed_distance(o3d.core.Tensor(sp)).numpy() < 0
             accuracy.append({"scene": name, "what": f"signed distance sign errors, strahl (of {len(sp)})", "value": int((sa != inside).sum())})
             accuracy.append({"scene": name, "what": f"signed distance sign errors, Open3D (of {len(sp)})", "value": int((sb != inside).sum())})
+            if has_embree:
+                sc = ref.contains_points(sp.astype(np.float64))
+                accuracy.append({"scene": name, "what": f"contains_points errors, trimesh+embreex (of {len(sp)})", "value": int((sc != inside).sum())})
+                accuracy.append({"scene": name, "what": f"contains_points errors, strahl (of {len(sp)})", "value": int((mine.contains_points(sp) != inside).sum())})
         for a in accuracy:
             if a["scene"] == name:
                 print(json.dumps(a), flush=True)
