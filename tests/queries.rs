@@ -183,8 +183,8 @@ fn inside_and_signed_distance_of_closed_meshes() {
     let mut rng = Pcg32::new(9, 3);
     let points: Vec<Vec3> =
         (0..4000).map(|_| rng_vec(&mut rng, -1.0, 1.0) * Vec3::new(2.0, 1.0, 1.0) + Vec3::X).collect();
-    let inside = batch::contains(&scene, &points);
-    let sdf = batch::signed_distances(&scene, &points);
+    let inside = batch::contains(&scene, &points, 3);
+    let sdf = batch::signed_distances(&scene, &points, 3);
     let mut wrong = 0;
     let mut n_inside = 0;
     for ((&p, &ins), &d) in points.iter().zip(&inside).zip(&sdf) {
@@ -254,7 +254,8 @@ fn instanced_queries_match_the_flattened_scene() {
         let (x, y) = (x.unwrap(), y.unwrap());
         assert!((x.distance - y.distance).abs() <= 1e-5 * (1.0 + y.distance), "{p}: {} vs {}", x.distance, y.distance);
     }
-    assert_eq!(batch::contains(&inst, &points), batch::contains(&flat, &points));
+    assert_eq!(batch::contains(&inst, &points, 3), batch::contains(&flat, &points, 3));
+    assert_eq!(batch::contains(&inst, &points, 1), batch::contains(&flat, &points, 1));
 }
 
 #[test]
@@ -314,7 +315,7 @@ fn inside_test_agrees_with_winding_numbers_on_igea() {
         let side = if k % 2 == 0 { 1.0 } else { -1.0 };
         points.push((a + b + c) / 3.0 + n * step * side);
     }
-    let inside = batch::contains(&scene, &points);
+    let inside = batch::contains(&scene, &points, 3);
     let (mut wrong, mut n_in) = (0, 0);
     for (p, &got) in points.iter().zip(&inside) {
         let w = winding_number(&meshes, *p);

@@ -222,6 +222,8 @@ def main() -> int:
                  lambda: theirs.compute_closest_points(pts_t, nthreads=nt)),
                 ("compute_signed_distance", len(pts), lambda: ours.compute_signed_distance(pts),
                  lambda: theirs.compute_signed_distance(pts_t, nthreads=nt)),
+                ("compute_signed_distance nsamples=1", len(pts), lambda: ours.compute_signed_distance(pts, nsamples=1),
+                 lambda: theirs.compute_signed_distance(pts_t, nthreads=nt, nsamples=1)),
             ]
             for op, n, a, b in ops:
                 a(), b()  # build, commit, warm up
@@ -312,6 +314,8 @@ def main() -> int:
             wn = winding_numbers(v, f, sp)
             inside = wn > 0.5
             sa = ours.compute_signed_distance(sp) < 0
+            sa1 = ours.compute_signed_distance(sp, nsamples=1) < 0
+            accuracy.append({"scene": name, "what": f"signed distance sign errors, strahl with one ray (of {len(sp)})", "value": int((sa1 != inside).sum())})
             sb = theirs.compute_signed_distance(o3d.core.Tensor(sp)).numpy() < 0
             accuracy.append({"scene": name, "what": f"signed distance sign errors, strahl (of {len(sp)})", "value": int((sa != inside).sum())})
             accuracy.append({"scene": name, "what": f"signed distance sign errors, Open3D (of {len(sp)})", "value": int((sb != inside).sum())})

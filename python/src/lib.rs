@@ -558,21 +558,29 @@ impl Core {
         Ok((Array2::from_shape_vec((n, 3), at).map_err(value_error)?.into_pyarray(py), cols.into_arrays(py)?))
     }
 
-    /// Signed distance of each of `(n, 3)` points: negative inside.
+    /// Signed distance of each of `(n, 3)` points: negative inside, by the majority of `votes`
+    /// rays' crossing parities.
     fn compute_signed_distance<'py>(
         &self,
         py: Python<'py>,
         points: PyReadonlyArray2<'py, f32>,
+        votes: usize,
     ) -> PyResult<Arr1<'py, f32>> {
         let p = points_of(rows(&points, 3, "query points")?);
-        let d = py.detach(|| self.pool.install(|| on_world!(&self.world, q => batch::signed_distances(q, &p))));
+        let d = py.detach(|| self.pool.install(|| on_world!(&self.world, q => batch::signed_distances(q, &p, votes))));
         Ok(Array1::from(d).into_pyarray(py))
     }
 
-    /// Whether each of `(n, 3)` points lies inside the closed surface.
-    fn compute_occupancy<'py>(&self, py: Python<'py>, points: PyReadonlyArray2<'py, f32>) -> PyResult<Arr1<'py, bool>> {
+    /// Whether each of `(n, 3)` points lies inside the closed surface (`votes` as for
+    /// [`compute_signed_distance`](Self::compute_signed_distance)).
+    fn compute_occupancy<'py>(
+        &self,
+        py: Python<'py>,
+        points: PyReadonlyArray2<'py, f32>,
+        votes: usize,
+    ) -> PyResult<Arr1<'py, bool>> {
         let p = points_of(rows(&points, 3, "query points")?);
-        let d = py.detach(|| self.pool.install(|| on_world!(&self.world, q => batch::contains(q, &p))));
+        let d = py.detach(|| self.pool.install(|| on_world!(&self.world, q => batch::contains(q, &p, votes))));
         Ok(Array1::from(d).into_pyarray(py))
     }
 }

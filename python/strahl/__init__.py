@@ -231,15 +231,17 @@ class RaycastingScene:
 
     def compute_signed_distance(self, query_points: Any, nthreads: int = 0, nsamples: int = 3) -> np.ndarray:
         """Distance to the surface, negative inside (float32). Inside is decided by the parity
-        of the crossings along three rays, by majority (``nsamples`` is accepted for Open3D's
-        signature; strahl always votes with three rays)."""
+        of the crossings along ``nsamples`` rays (1 to 7; a tie counts as outside), by
+        majority. strahl's default is 3; Open3D's is 1, which is right on a closed mesh and
+        wrong wherever its ray meets a hole."""
         q, lead = _float_rows(query_points, 3, "query_points")
-        return self._built().compute_signed_distance(q).reshape(lead)
+        return self._built().compute_signed_distance(q, _votes(nsamples)).reshape(lead)
 
     def compute_occupancy(self, query_points: Any, nthreads: int = 0, nsamples: int = 3) -> np.ndarray:
-        """1.0 inside the closed surface, 0.0 outside (float32, as Open3D's)."""
+        """1.0 inside the closed surface, 0.0 outside (float32, as Open3D's); ``nsamples`` as
+        for :meth:`compute_signed_distance`."""
         q, lead = _float_rows(query_points, 3, "query_points")
-        return self._built().compute_occupancy(q).astype(np.float32).reshape(lead)
+        return self._built().compute_occupancy(q, _votes(nsamples)).astype(np.float32).reshape(lead)
 
     # -- helpers ------------------------------------------------------------------------------
 
@@ -294,6 +296,12 @@ def load_obj(path: Any, merge: bool = True) -> Any:
     v = np.concatenate([v for v, _ in meshes])
     f = np.concatenate([f + np.uint32(o) for (_, f), o in zip(meshes, offsets)])
     return v, f
+
+
+def _votes(nsamples: Any) -> int:
+    if isinstance(nsamples, bool) or not isinstance(nsamples, (int, np.integer)) or not 1 <= nsamples <= 7:
+        raise ValueError(f"nsamples must be an integer from 1 to 7, got {nsamples!r}")
+    return int(nsamples)
 
 
 def _width(lead: Tuple[int, ...]) -> int:

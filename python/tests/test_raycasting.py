@@ -222,6 +222,13 @@ def test_signed_distance_and_occupancy_of_closed_meshes():
     np.testing.assert_array_equal(sd < 0, occ == 1)
     np.testing.assert_allclose(np.abs(sd), s.compute_distance(pts), rtol=1e-6)
     assert (occ == 1).sum() > 200
+    # One ray, as Open3D casts, or seven: the same answers on closed meshes.
+    for n in (1, 7):
+        np.testing.assert_array_equal(s.compute_occupancy(pts, nsamples=n)[keep], occ[keep])
+        np.testing.assert_array_equal(s.compute_signed_distance(pts, nsamples=n)[keep], sd[keep])
+    for bad in (0, 8, 2.5, True):
+        with pytest.raises(ValueError, match="nsamples"):
+            s.compute_occupancy(pts[:3], nsamples=bad)
 
 
 # -- instancing --------------------------------------------------------------------------------

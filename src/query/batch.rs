@@ -72,12 +72,13 @@ pub fn closest_points<Q: SpatialQuery>(q: &Q, points: &[Vec3]) -> Vec<Option<Clo
     points.par_iter().with_min_len(CHUNK).map(|&p| q.closest_point(p, f32::INFINITY)).collect()
 }
 
-/// [`SpatialQuery::signed_distance`] of every point.
-pub fn signed_distances<Q: SpatialQuery>(q: &Q, points: &[Vec3]) -> Vec<f32> {
-    points.par_iter().with_min_len(CHUNK).map(|&p| q.signed_distance(p)).collect()
+/// [`SpatialQuery::signed_distance_votes`] of every point, with `rays` votes each
+/// ([`DEFAULT_VOTES`](super::DEFAULT_VOTES) for [`SpatialQuery::signed_distance`]).
+pub fn signed_distances<Q: SpatialQuery>(q: &Q, points: &[Vec3], rays: usize) -> Vec<f32> {
+    points.par_iter().with_min_len(CHUNK).map(|&p| q.signed_distance_votes(p, rays)).collect()
 }
 
-/// [`SpatialQuery::contains`] of every point.
-pub fn contains<Q: SpatialQuery>(q: &Q, points: &[Vec3]) -> Vec<bool> {
-    points.par_iter().with_min_len(CHUNK).map(|&p| q.contains(p)).collect()
+/// [`SpatialQuery::contains_votes`] of every point, with `rays` votes each.
+pub fn contains<Q: SpatialQuery>(q: &Q, points: &[Vec3], rays: usize) -> Vec<bool> {
+    points.par_iter().with_min_len(CHUNK).map(|&p| q.contains_votes(p, rays)).collect()
 }

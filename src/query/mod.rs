@@ -31,13 +31,21 @@ use crate::instance::InstancedScene;
 use crate::ray::{Hit, Ray};
 use crate::scene::{Query, Scene};
 
-/// Directions of the rays [`SpatialQuery::contains`] casts: unit vectors along no axis or
-/// diagonal, so that none runs along the faces, edges or diagonals of axis-aligned geometry.
-pub const INSIDE_DIRECTIONS: [Vec3; 3] = [
+/// Directions of the rays [`SpatialQuery::contains_votes`] casts, the first `rays` of them: unit
+/// vectors along no axis or diagonal, so that none runs along the faces, edges or diagonals of
+/// axis-aligned geometry.
+pub const INSIDE_DIRECTIONS: [Vec3; 7] = [
     Vec3::new(0.486_164_1, 0.699_861_4, 0.523_461_36),
     Vec3::new(-0.597_017_2, 0.298_508_63, -0.744_649_9),
     Vec3::new(0.254_628_85, -0.890_008_2, 0.378_188_4),
+    Vec3::new(-0.878_836_2, 0.416_927_6, 0.231_987_6),
+    Vec3::new(-0.609_615_4, 0.732_779, 0.302_330_8),
+    Vec3::new(-0.598_727_2, 0.711_324_4, -0.368_162_1),
+    Vec3::new(-0.159_409_3, 0.480_261_8, -0.862_518),
 ];
+
+/// Rays [`SpatialQuery::contains`] and [`SpatialQuery::signed_distance`] vote with.
+pub const DEFAULT_VOTES: usize = 3;
 
 /// Queries that need more than the first hit. Every query gives a defined answer for any input:
 /// invalid rays (see [`Ray::is_valid`]) hit nothing, non-finite query points have no closest
@@ -87,7 +95,7 @@ pub trait SpatialQuery: Query {
     }
 
     /// Whether `p` lies inside the closed surface: the parity of the crossings of rays from `p`
-    /// in the three [`INSIDE_DIRECTIONS`], by majority. With the watertight triangle test and
+    /// in the first three [`INSIDE_DIRECTIONS`], by majority. With the watertight triangle test and
     /// the conservative box test ([`BuildConfig::watertight`]) no ray slips between the
     /// triangles of a closed mesh and [`merge_crossings`] counts a ray through a shared edge or
     /// vertex once, so one ray already answers right; the vote outvotes a ray that meets a hole
@@ -97,31 +105,46 @@ pub trait SpatialQuery: Query {
     ///
     /// [`BuildConfig::watertight`]: crate::BuildConfig::watertight
     fn contains(&self, p: Vec3) -> bool {
+        self.contains_votes(p, DEFAULT_VOTES)
+    }
+
+    /// [`contains`](Self::contains) by the majority of the first `rays` of the
+    /// [`INSIDE_DIRECTIONS`] (clamped to 1..=7; with an even number a tie counts as outside).
+    /// One ray is what Open3D casts by default: right on a closed mesh built watertight, wrong
+    /// wherever it meets a hole.
+    fn contains_votes(&self, p: Vec3, rays: usize) -> bool {
         if !p.is_finite() {
             return false;
         }
+        let rays = rays.clamp(1, INSIDE_DIRECTIONS.len());
         let mut hits = Vec::new();
-        let odd = INSIDE_DIRECTIONS
+        let odd = INSIDE_DIRECTIONS[..rays]
             .iter()
             .filter(|&&d| {
                 self.crossings(&Ray::new(p, d), &mut hits);
                 hits.len() % 2 == 1
             })
             .count();
-        odd >= 2
+        2 * odd > rays
     }
 
     /// Distance from `p` to the surface, negative inside (see [`contains`](Self::contains)),
     /// as Open3D's `compute_signed_distance`. `+∞` in an empty scene; NaN for a point that is
     /// not finite.
     fn signed_distance(&self, p: Vec3) -> f32 {
+        self.signed_distance_votes(p, DEFAULT_VOTES)
+    }
+
+    /// [`signed_distance`](Self::signed_distance) with the inside test of
+    /// [`contains_votes`](Self::contains_votes).
+    fn signed_distance_votes(&self, p: Vec3, rays: usize) -> f32 {
         if !p.is_finite() {
             return f32::NAN;
         }
         let Some(c) = self.closest_point(p, f32::INFINITY) else {
             return f32::INFINITY;
         };
-        if self.contains(p) { -c.distance } else { c.distance }
+        if self.contains_votes(p, rays) { -c.distance } else { c.distance }
     }
 }
 
