@@ -11,7 +11,7 @@ if ! rustup toolchain list | grep -q '^nightly'; then
 fi
 command -v cargo-fuzz > /dev/null || cargo install --locked cargo-fuzz >&2
 cargo +nightly fuzz build -O >&2
-for target in obj scene_file differential; do
+for target in obj scene_file differential serialized; do
   corpus="$(mktemp -d)"
   [ -d "seeds/$target" ] && cp "seeds/$target"/* "$corpus"/
   echo "fuzz smoke: $target, 20 s" >&2
@@ -19,4 +19,4 @@ for target in obj scene_file differential; do
     | grep -E "^(Done|stat::number_of_executed_units)|ERROR|panicked|SUMMARY" >&2
   rm -rf "$corpus"
 done
-echo "fuzz: 3 passed, 0 failed"
+echo "fuzz: 4 passed, 0 failed"

@@ -7,7 +7,8 @@
 //! once to make sure every child reference lies in its array, no node is reached twice (so no walk
 //! can loop) and no path is deeper than a built tree can be (so the fixed traversal stack is never
 //! outgrown). Bytes that fail any check are [`Error::Serialized`]; none can make a query panic,
-//! hang or read out of bounds.
+//! hang or read out of bounds. The build statistics are read back as they were written; the one
+//! of them that traversal reads (`bytes`) must match the arrays, the others are only figures.
 
 use glam::{Affine3A, Vec3};
 
@@ -35,7 +36,13 @@ impl Scene {
     /// strahl, on machines of the same byte order.
     pub fn to_bytes(&self) -> Vec<u8> {
         let bvh = self.bvh();
-        let mut w = Writer(Vec::with_capacity(64 + bvh.stats.bytes + self.meshes().len() * 64));
+        // Sized from the arrays themselves, never from the statistics (which a loaded scene took
+        // from its bytes unchecked: a fuzzed `bytes` figure asked for 2^56 bytes here).
+        let mesh_bytes: usize =
+            self.meshes().iter().map(|m| 64 + m.name.len() + 12 * (m.positions().len() + m.indices().len())).sum();
+        let tree_bytes =
+            bvh.nodes.len() * std::mem::size_of::<Node>() + bvh.blocks.len() * std::mem::size_of::<TriBlock>();
+        let mut w = Writer(Vec::with_capacity(256 + mesh_bytes + tree_bytes));
         w.0.extend_from_slice(MAGIC);
         w.u32(VERSION);
         w.u8(test_code(bvh.test));
@@ -98,8 +105,8 @@ impl Scene {
             2 => TriangleTest::Watertight,
             t => return Err(bad(format!("unknown triangle test {t}"))),
         };
-        let box_test = if r.u8()? != 0 { BoxTest::Conservative } else { BoxTest::Fast };
-        let prefetch = r.u8()? != 0;
+        let box_test = if r.flag()? { BoxTest::Conservative } else { BoxTest::Fast };
+        let prefetch = r.flag()?;
         let mesh_count = r.count(24)?;
         let mut meshes = Vec::with_capacity(mesh_count);
         for _ in 0..mesh_count {
@@ -143,9 +150,9 @@ impl Scene {
                 (ids[..BLOCK].try_into().expect("BLOCK ids"), ids[BLOCK..].try_into().expect("BLOCK ids"));
             blocks.push(TriBlock { rows, geom, prim });
         }
-        let bounds = match r.u8()? {
-            0 => None,
-            _ => {
+        let bounds = match r.flag()? {
+            false => None,
+            true => {
                 let v: Vec<f32> = (0..6).map(|_| r.f32()).collect::<Result<_>>()?;
                 Some((Vec3::new(v[0], v[1], v[2]), Vec3::new(v[3], v[4], v[5])))
             }
@@ -171,6 +178,12 @@ impl Scene {
         };
         if !r.b.is_empty() {
             return Err(bad(format!("{} bytes after the scene", r.b.len())));
+        }
+        // The one figure traversal reads (whether the tree is out of the cache), and what
+        // two-level scenes sum over their objects: it must be the arrays' own size.
+        let tree_bytes = nodes.len() * std::mem::size_of::<Node>() + blocks.len() * std::mem::size_of::<TriBlock>();
+        if stats.bytes != tree_bytes {
+            return Err(bad(format!("the statistics give {} bytes for a tree of {tree_bytes}", stats.bytes)));
         }
         check_tree(&nodes, blocks.len(), root)?;
         check_blocks(&blocks, test, &meshes)?;
@@ -346,6 +359,14 @@ impl<'a> Reader<'a> {
     fn u32(&mut self) -> Result<u32> {
         Ok(u32::from_le_bytes(self.array()?))
     }
+    /// A byte that must be 0 or 1, so that every scene has one encoding.
+    fn flag(&mut self) -> Result<bool> {
+        match self.u8()? {
+            0 => Ok(false),
+            1 => Ok(true),
+            b => Err(bad(format!("a flag byte of {b}, not 0 or 1"))),
+        }
+    }
     fn u64(&mut self) -> Result<u64> {
         Ok(u64::from_le_bytes(self.array()?))
     }
@@ -396,6 +417,12 @@ mod tests {
             let mut extra = bytes.clone();
             extra.push(0);
             assert!(Scene::from_bytes(&extra).is_err());
+            // A `bytes` figure that is not the tree's (fuzzing found one that asked `to_bytes`
+            // for 2^56 bytes of capacity): refused.
+            let mut figure = bytes.clone();
+            let at = figure.len() - 24;
+            figure[at + 6] = 0xf7;
+            assert!(matches!(Scene::from_bytes(&figure), Err(Error::Serialized(m)) if m.contains("statistics")));
         }
         let empty = Scene::build(vec![], &BuildConfig::default()).unwrap();
         assert!(Scene::from_bytes(&empty.to_bytes()).unwrap().intersect(&Ray::new(Vec3::ZERO, Vec3::X)).is_none());
