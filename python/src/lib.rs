@@ -6,6 +6,8 @@
 //! class), so any number of Python threads may query it at once. Shapes are checked here again:
 //! a wrong one is a `ValueError`, never a panic.
 
+use std::borrow::Cow;
+
 use glam::{Affine3A, Mat3A, Vec3, Vec3A};
 use numpy::ndarray::{Array1, Array2};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray2, PyUntypedArrayMethods};
@@ -144,13 +146,7 @@ impl Jobs {
     /// One job's rays as a stream, the row index of each stream entry (if reordered), and how
     /// coherent the rays are; `None` where the rays are better traced one by one: rays whose
     /// origins scatter (see [`scattered`]).
-    fn stream(
-        &self,
-        r: &[f32],
-        tnear: f32,
-        tfar: f32,
-        scene_size: f32,
-    ) -> Option<(RayStream, Option<Vec<u32>>, Coherence)> {
+    fn stream(&self, r: &[f32], tnear: f32, tfar: f32, scene_size: f32) -> Option<JobStream<'_>> {
         let n = r.len() / 6;
         let camera = one_origin(r);
         if !camera && scattered(r, scene_size) {
@@ -159,13 +155,16 @@ impl Jobs {
         let mut stream = RayStream::with_capacity(n);
         let coherence = if camera { Coherence::Coherent } else { Coherence::Incoherent };
         if camera && self.width > 0 {
-            let order = if n == self.size {
-                self.strip_order.clone()
+            // Whole strips share one order; only the image's last, shorter strip makes its own.
+            let order: Cow<'_, [u32]> = if n == self.size {
+                Cow::Borrowed(&self.strip_order)
             } else {
                 let w = self.width as u32;
-                strahl::camera::tile_order(w, (n / self.width) as u32).iter().map(|&(x, y)| y * w + x).collect()
+                Cow::Owned(
+                    strahl::camera::tile_order(w, (n / self.width) as u32).iter().map(|&(x, y)| y * w + x).collect(),
+                )
             };
-            for &i in &order {
+            for &i in order.iter() {
                 stream.push(&ray_of(&r[6 * i as usize..6 * i as usize + 6], tnear, tfar));
             }
             return Some((stream, Some(order), coherence));
@@ -201,6 +200,10 @@ fn scattered(r: &[f32], scene_size: f32) -> bool {
     }
     runs > 0 && sum / runs as f32 > 0.02 * scene_size
 }
+
+/// One job's rays as a stream, the row of each stream entry where they were reordered, and how
+/// coherent they are.
+type JobStream<'a> = (RayStream, Option<Cow<'a, [u32]>>, Coherence);
 
 /// Whether a chunk of rays is a camera's: one origin for all.
 fn one_origin(rays: &[f32]) -> bool {

@@ -165,22 +165,22 @@ pub fn merge_crossings(ray: &Ray, hits: &mut Vec<Hit>) {
     }
     let tol = |t: f32| 64.0 * f32::EPSILON * ray.origin.abs().max_element().max(ray.at(t).abs().max_element()) / len;
     let facing = |h: &Hit| h.ng.dot(ray.dir) > 0.0;
-    let mut kept: Vec<Hit> = Vec::with_capacity(hits.len());
-    // Start of the current run of coincident hits in `kept`.
-    let mut run = 0;
-    for h in hits.iter() {
-        if let Some(first) = kept.get(run)
-            && h.t - first.t <= tol(h.t)
-        {
-            if kept[run..].iter().any(|k| facing(k) == facing(h)) {
+    // In place: `hits[..kept]` are the hits kept so far; `run` starts the current run of
+    // coincident hits among them (no allocation: this runs once per ray of every count).
+    let (mut kept, mut run) = (0, 0);
+    for i in 0..hits.len() {
+        let h = hits[i];
+        if run < kept && h.t - hits[run].t <= tol(h.t) {
+            if hits[run..kept].iter().any(|k| facing(k) == facing(&h)) {
                 continue;
             }
         } else {
-            run = kept.len();
+            run = kept;
         }
-        kept.push(*h);
+        hits[kept] = h;
+        kept += 1;
     }
-    *hits = kept;
+    hits.truncate(kept);
 }
 
 impl SpatialQuery for Scene {
