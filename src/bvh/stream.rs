@@ -57,7 +57,10 @@ impl Bvh {
         stack: &mut Stack,
     ) -> u32 {
         // The walk's own function, compiled for `L` (and never inlined into its caller).
-        L::call(|| self.occluded_stream_in::<K, CONS, L>(rays, base, ids, octant, stack))
+        L::call(
+            #[inline(always)]
+            || self.occluded_stream_in::<K, CONS, L>(rays, base, ids, octant, stack),
+        )
     }
 
     #[inline(always)]

@@ -267,11 +267,17 @@ macro_rules! with_level {
         match $crate::simd::isa() {
             $crate::simd::Isa::Avx2 => {
                 type $l = $crate::simd::Avx2;
-                <$l as $crate::simd::Level>::call(|| $body)
+                <$l as $crate::simd::Level>::call(
+                    #[inline(always)]
+                    || $body,
+                )
             }
             _ => {
                 type $l = $crate::simd::Base;
-                <$l as $crate::simd::Level>::call(|| $body)
+                <$l as $crate::simd::Level>::call(
+                    #[inline(always)]
+                    || $body,
+                )
             }
         }
     };
