@@ -20,17 +20,6 @@
 
 use core::ops::{Add, AddAssign, BitAnd, BitOr, BitXor, Div, Mul, MulAssign, Neg, Not, Sub, SubAssign};
 
-/// Keeps LLVM from turning `*p = m.select(x, *p)` into a masked store (`vmaskmovps`): with the
-/// comparison visible as a plain `fcmp`, it folds a store of a select whose other operand is a
-/// load from the same address into one, which costs a dozen micro-ops and blocks store-to-load
-/// forwarding on AMD Zen 3 — shadow packets ran at 0.39× of the `wide` build, whose comparisons
-/// were opaque intrinsics (PERFORMANCE.md). A compiler fence is no instruction, but the fold
-/// needs the load and the store next to each other on the memory chain.
-#[inline(always)]
-fn no_masked_store() {
-    core::sync::atomic::compiler_fence(core::sync::atomic::Ordering::SeqCst);
-}
-
 /// All bits set: a true lane of a comparison mask.
 const TRUE: u32 = u32::MAX;
 
@@ -168,7 +157,6 @@ macro_rules! float_lanes {
             /// (`blendvps`: masks from comparisons set all bits or none).
             #[inline(always)]
             pub fn select(self, t: Self, f: Self) -> Self {
-                no_masked_store();
                 Self(core::array::from_fn(|i| if (self.0[i].to_bits() as i32) < 0 { t.0[i] } else { f.0[i] }))
             }
             /// `minps`: `self < o ? self : o` (so `o` where either is NaN).
@@ -386,7 +374,6 @@ macro_rules! int_lanes {
             /// `t` in the lanes whose sign bit is set in the mask `self`, `f` elsewhere.
             #[inline(always)]
             pub fn select(self, t: Self, f: Self) -> Self {
-                no_masked_store();
                 Self(core::array::from_fn(|i| if self.0[i] < 0 { t.0[i] } else { f.0[i] }))
             }
         }
