@@ -306,7 +306,6 @@ impl InstancedScene {
     /// The instance level's walk; at each instance the object's walk continues on the same stack
     /// with the same kernel, so entering an instance costs one transform and no dispatch.
     /// Invalid rays miss.
-    #[inline(always)]
     fn trace1_with<const ANY: bool, K: Kernel, const CONS: bool, L: Level>(
         &self,
         ray: &Ray,
@@ -346,35 +345,26 @@ impl InstancedScene {
         let mut tfar = ray.tfar;
         let mut best = None;
         let base = stack.push_root(root);
-        walk1::<ANY, CONS, L>(
-            self.instance_tree(),
-            &br,
-            stack,
-            base,
-            &mut tfar,
-            #[inline(always)]
-            |leaf, tfar, stack| {
-                let (start, count) = leaf_blocks(leaf);
-                for k in start..start + count {
-                    let p = &self.placed[k];
-                    let r = object_ray(&p.to_object, ray, *tfar);
-                    // Finite in, finite out, except where a huge scale overflows: such rays miss.
-                    if !(r.origin.is_finite() && r.dir.is_finite()) {
-                        continue;
-                    }
-                    if let Some(h) =
-                        self.objects[p.object as usize].bvh().trace1_with::<ANY, false, K, CONS, L>(&r, stack)
-                    {
-                        *tfar = h.t;
-                        best = Some((k as u32, h));
-                        if ANY {
-                            return true;
-                        }
+        walk1::<ANY, CONS, L>(self.instance_tree(), &br, stack, base, &mut tfar, |leaf, tfar, stack| {
+            let (start, count) = leaf_blocks(leaf);
+            for k in start..start + count {
+                let p = &self.placed[k];
+                let r = object_ray(&p.to_object, ray, *tfar);
+                // Finite in, finite out, except where a huge scale overflows: such rays miss.
+                if !(r.origin.is_finite() && r.dir.is_finite()) {
+                    continue;
+                }
+                if let Some(h) = self.objects[p.object as usize].bvh().trace1_with::<ANY, false, K, CONS, L>(&r, stack)
+                {
+                    *tfar = h.t;
+                    best = Some((k as u32, h));
+                    if ANY {
+                        return true;
                     }
                 }
-                false
-            },
-        );
+            }
+            false
+        });
         best
     }
 
@@ -386,7 +376,6 @@ impl InstancedScene {
         })
     }
 
-    #[inline(always)]
     fn trace_packet_with<const ANY: bool, K: Kernel, const CONS: bool, L: Level>(
         &self,
         p: &RayPacket,
@@ -406,83 +395,70 @@ impl InstancedScene {
         let spread = if !ANY && pb.frustum.is_none() { pb.origin_extent() } else { 0.0 };
         // One object's hits, before they are turned to world space.
         let mut r = HitPacket::default();
-        walk_packet::<ANY, CONS, L>(
-            self.instance_tree(),
-            &pb,
-            stack,
-            base,
-            &mut tfar,
-            #[inline(always)]
-            |leaf, lanes, tfar, stack| {
-                if lanes != 0 {
-                    // A few lanes walk this part of the instance tree one at a time.
-                    out.mask |= each_lane_alone::<ANY, _>(
-                        p,
-                        lanes,
+        walk_packet::<ANY, CONS, L>(self.instance_tree(), &pb, stack, base, &mut tfar, |leaf, lanes, tfar, stack| {
+            if lanes != 0 {
+                // A few lanes walk this part of the instance tree one at a time.
+                out.mask |= each_lane_alone::<ANY, _>(
+                    p,
+                    lanes,
+                    tfar,
+                    |l, ray| {
+                        let (k, h) = self.trace1_from_terms::<ANY, K, CONS, L>(ray, pb.slabs.lane(l), leaf, stack)?;
+                        Some((h.t, (k, h)))
+                    },
+                    |l, (k, h)| out.set(l, &self.world_hit(k, &self.object_hit(k, &h))),
+                );
+                return ANY && out.mask == pb.live;
+            }
+            let (start, count) = leaf_blocks(leaf);
+            for k in start..start + count {
+                let pl = &self.placed[k];
+                // Only the lanes that enter this instance's box go into the object.
+                let active = pb.lanes_in_box::<CONS, L>(pl.lo, pl.hi, *tfar) & pb.live;
+                if active == 0 {
+                    continue;
+                }
+                let (q, [qo, qd]) = object_packet(&pl.to_object, &pb, *tfar, active);
+                let bvh = self.objects[pl.object as usize].bvh();
+                if !ANY && pb.frustum.is_none() && !packet_walks_object(active, spread, pl) {
+                    // Incoherent closest-hit rays: each lane that enters the instance walks the
+                    // object alone, as Embree's instances hand their lanes to the object's hybrid
+                    // walk, which takes single rays for so few lanes. Diffuse packets run 10–15%
+                    // faster this way than through the object's packet walk; occlusion packets lost
+                    // 13% on the forest, so they keep it (PERFORMANCE.md). Many lanes from nearby
+                    // origins take the object's packet walk instead (`packet_walks_object`). The
+                    // lanes' slab terms are computed here, 16 at a time.
+                    let qs = LaneSlabs::of(&qo, &qd);
+                    out.mask |= each_lane_alone::<false, _>(
+                        &q,
+                        active,
                         tfar,
-                        #[inline(always)]
                         |l, ray| {
-                            let (k, h) =
-                                self.trace1_from_terms::<ANY, K, CONS, L>(ray, pb.slabs.lane(l), leaf, stack)?;
-                            Some((h.t, (k, h)))
+                            let h = bvh.trace1_from_terms::<false, K, CONS, L>(ray, qs.lane(l), bvh.root, stack)?;
+                            Some((h.t, h))
                         },
-                        #[inline(always)]
-                        |l, (k, h)| out.set(l, &self.world_hit(k, &self.object_hit(k, &h))),
+                        |l, h| out.set(l, &self.world_hit(k as u32, &bvh.hit_record(&h))),
                     );
-                    return ANY && out.mask == pb.live;
+                    continue;
                 }
-                let (start, count) = leaf_blocks(leaf);
-                for k in start..start + count {
-                    let pl = &self.placed[k];
-                    // Only the lanes that enter this instance's box go into the object.
-                    let active = pb.lanes_in_box::<CONS, L>(pl.lo, pl.hi, *tfar) & pb.live;
-                    if active == 0 {
-                        continue;
-                    }
-                    let (q, [qo, qd]) = object_packet(&pl.to_object, &pb, *tfar, active);
-                    let bvh = self.objects[pl.object as usize].bvh();
-                    if !ANY && pb.frustum.is_none() && !packet_walks_object(active, spread, pl) {
-                        // Incoherent closest-hit rays: each lane that enters the instance walks the
-                        // object alone, as Embree's instances hand their lanes to the object's hybrid
-                        // walk, which takes single rays for so few lanes. Diffuse packets run 10–15%
-                        // faster this way than through the object's packet walk; occlusion packets lost
-                        // 13% on the forest, so they keep it (PERFORMANCE.md). Many lanes from nearby
-                        // origins take the object's packet walk instead (`packet_walks_object`). The
-                        // lanes' slab terms are computed here, 16 at a time.
-                        let qs = LaneSlabs::of(&qo, &qd);
-                        out.mask |= each_lane_alone::<false, _>(
-                            &q,
-                            active,
-                            tfar,
-                            #[inline(always)]
-                            |l, ray| {
-                                let h = bvh.trace1_from_terms::<false, K, CONS, L>(ray, qs.lane(l), bvh.root, stack)?;
-                                Some((h.t, h))
-                            },
-                            #[inline(always)]
-                            |l, h| out.set(l, &self.world_hit(k as u32, &bvh.hit_record(&h))),
-                        );
-                        continue;
-                    }
-                    let mask = bvh.trace_packet_with::<ANY, K, CONS, L>(&q, &mut r, stack);
-                    if mask == 0 {
-                        continue;
-                    }
-                    let valid = lane_mask(mask);
-                    out.mask |= mask;
-                    if ANY {
-                        *tfar = valid.select(Pf::splat(f32::NEG_INFINITY), *tfar);
-                        if out.mask == pb.live {
-                            return true;
-                        }
-                    } else {
-                        *tfar = valid.select(Pf::new(r.t), *tfar);
-                        out.take_instanced(valid, &r, &pl.normal_to_world, pl.id);
-                    }
+                let mask = bvh.trace_packet_with::<ANY, K, CONS, L>(&q, &mut r, stack);
+                if mask == 0 {
+                    continue;
                 }
-                false
-            },
-        );
+                let valid = lane_mask(mask);
+                out.mask |= mask;
+                if ANY {
+                    *tfar = valid.select(Pf::splat(f32::NEG_INFINITY), *tfar);
+                    if out.mask == pb.live {
+                        return true;
+                    }
+                } else {
+                    *tfar = valid.select(Pf::new(r.t), *tfar);
+                    out.take_instanced(valid, &r, &pl.normal_to_world, pl.id);
+                }
+            }
+            false
+        });
         out.mask
     }
 

@@ -55,7 +55,6 @@ pub use ray::{Hit, HitPacket, HitStream, INVALID_ID, PACKET_WIDTH, Ray, RayPacke
 pub use render::Light;
 pub use scene::{Coherence, Query, STREAM_CHUNK, Scene};
 pub use scene_file::SceneFile;
-pub use simd::{Isa, isa, set_isa};
 
 /// The README's code examples run as doctests.
 #[cfg(doctest)]

@@ -270,10 +270,7 @@ fn machine() -> String {
         })
         .unwrap_or_else(|| "unknown CPU".into());
     let cores = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(0);
-    // The level strahl's kernels ran at, and what the crate itself was compiled for (a build
-    // without `target-cpu=native` is baseline x86-64 and reaches AVX2 through run-time dispatch).
-    let built = if cfg!(target_feature = "avx2") { "built for AVX2" } else { "built for baseline x86-64" };
-    format!("{cpu}, {cores} cores visible, strahl kernels at level {} ({built})", strahl::isa())
+    format!("{cpu}, {cores} cores visible")
 }
 
 fn commit() -> String {

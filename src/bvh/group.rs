@@ -71,10 +71,7 @@ impl Bvh {
         stack: &mut Stack,
     ) {
         // The walk's own function, compiled for `L` (and never inlined into its caller).
-        L::call(
-            #[inline(always)]
-            || self.trace_group_with_in::<K, CONS, L>(ps, out, stack),
-        )
+        L::call(|| self.trace_group_with_in::<K, CONS, L>(ps, out, stack))
     }
 
     #[inline(always)]
@@ -123,35 +120,23 @@ impl Bvh {
             }
             return;
         };
-        walk_group::<CONS>(
-            &self.nodes,
-            self.root,
-            &gf,
-            &sf,
-            subs,
-            &mut tfar,
-            stack,
-            #[inline(always)]
-            |r, m, solo, tfar, stack| {
-                let mut m = m;
-                while m != 0 {
-                    let s = m.trailing_zeros() as usize;
-                    m &= m - 1;
-                    if solo {
-                        // The packet's own walk, with its per-lane mode below its footprint.
-                        let p = RayPacket { tfar: tfar[s].to_array(), active: live[s], ..ps[s] };
-                        self.trace_packet_from::<false, K, CONS, L>(&p, r, &mut out[s], stack);
-                        let hit = out[s].mask;
-                        tfar[s] =
-                            Pf::new(std::array::from_fn(
-                                |l| if hit & (1 << l) != 0 { out[s].hit.t[l] } else { p.tfar[l] },
-                            ));
-                    } else {
-                        self.leaf_packet::<false, K, L>(r, &rk[s], rk[s].tnear, live[s], &mut tfar[s], &mut out[s]);
-                    }
+        walk_group::<CONS>(&self.nodes, self.root, &gf, &sf, subs, &mut tfar, stack, |r, m, solo, tfar, stack| {
+            let mut m = m;
+            while m != 0 {
+                let s = m.trailing_zeros() as usize;
+                m &= m - 1;
+                if solo {
+                    // The packet's own walk, with its per-lane mode below its footprint.
+                    let p = RayPacket { tfar: tfar[s].to_array(), active: live[s], ..ps[s] };
+                    self.trace_packet_from::<false, K, CONS, L>(&p, r, &mut out[s], stack);
+                    let hit = out[s].mask;
+                    tfar[s] =
+                        Pf::new(std::array::from_fn(|l| if hit & (1 << l) != 0 { out[s].hit.t[l] } else { p.tfar[l] }));
+                } else {
+                    self.leaf_packet::<false, K, L>(r, &rk[s], rk[s].tnear, live[s], &mut tfar[s], &mut out[s]);
                 }
-            },
-        );
+            }
+        });
     }
 }
 

@@ -57,10 +57,7 @@ impl Bvh {
         stack: &mut Stack,
     ) -> u32 {
         // The walk's own function, compiled for `L` (and never inlined into its caller).
-        L::call(
-            #[inline(always)]
-            || self.occluded_stream_in::<K, CONS, L>(rays, base, ids, octant, stack),
-        )
+        L::call(|| self.occluded_stream_in::<K, CONS, L>(rays, base, ids, octant, stack))
     }
 
     #[inline(always)]

@@ -436,7 +436,6 @@ const LANE_MODE: u32 = 1 << 30;
 impl Frustum {
     /// `None` unless the live lanes share one origin and one direction octant (camera packets).
     /// `tnear` holds `+inf` in the lanes out of the query; `live_mask` selects the live lanes.
-    #[inline(always)]
     fn new(o: &[Pf; 3], rdir: &[Pf; 3], tnear: Pf, live: u32, live_mask: Pf) -> Option<Self> {
         let zero = Pf::splat(0.0);
         let inf = Pf::splat(f32::INFINITY);
@@ -650,10 +649,7 @@ impl Bvh {
         stack: &mut Stack,
     ) -> Option<LeafHit> {
         // The walk's own function, compiled for `L` (and never inlined into its caller).
-        L::call(
-            #[inline(always)]
-            || self.trace1_with_in::<ANY, CHECK, K, CONS, L>(ray, stack),
-        )
+        L::call(|| self.trace1_with_in::<ANY, CHECK, K, CONS, L>(ray, stack))
     }
 
     #[inline(always)]
@@ -703,27 +699,19 @@ impl Bvh {
         let br = BoxRay::with_terms(terms, ray.tnear);
         let mut tfar = ray.tfar;
         let mut best = None;
-        walk1::<ANY, CONS, L>(
-            self.tree(),
-            &br,
-            stack,
-            base,
-            &mut tfar,
-            #[inline(always)]
-            |leaf, tfar, _| {
-                let (start, count) = leaf_blocks(leaf);
-                for bi in start..start + count {
-                    if let Some((lane, t, u, v)) = K::intersect1::<L>(&self.blocks[bi], &r4, &pre, ray.tnear, *tfar) {
-                        *tfar = t;
-                        best = Some(LeafHit { block: bi as u32, lane: lane as u32, t, u, v });
-                        if ANY {
-                            return true;
-                        }
+        walk1::<ANY, CONS, L>(self.tree(), &br, stack, base, &mut tfar, |leaf, tfar, _| {
+            let (start, count) = leaf_blocks(leaf);
+            for bi in start..start + count {
+                if let Some((lane, t, u, v)) = K::intersect1::<L>(&self.blocks[bi], &r4, &pre, ray.tnear, *tfar) {
+                    *tfar = t;
+                    best = Some(LeafHit { block: bi as u32, lane: lane as u32, t, u, v });
+                    if ANY {
+                        return true;
                     }
                 }
-                false
-            },
-        );
+            }
+            false
+        });
         best
     }
 
@@ -747,10 +735,7 @@ impl Bvh {
         stack: &mut Stack,
     ) -> u32 {
         // The walk's own function, compiled for `L` (and never inlined into its caller).
-        L::call(
-            #[inline(always)]
-            || self.trace_packet_with_in::<ANY, K, CONS, L>(p, hit, stack),
-        )
+        L::call(|| self.trace_packet_with_in::<ANY, K, CONS, L>(p, hit, stack))
     }
 
     #[inline(always)]
@@ -784,33 +769,23 @@ impl Bvh {
         };
         let base = stack.push_root(root);
         let rk = RayK { o: pb.o, d: pb.d, tnear: pb.tnear };
-        walk_packet::<ANY, CONS, L>(
-            self.tree(),
-            &pb,
-            stack,
-            base,
-            &mut tfar,
-            #[inline(always)]
-            |leaf, lanes, tfar, stack| {
-                if lanes != 0 {
-                    // A few lanes walk this subtree one at a time.
-                    out.mask |= each_lane_alone::<ANY, _>(
-                        p,
-                        lanes,
-                        tfar,
-                        #[inline(always)]
-                        |l, ray| {
-                            let h = self.trace1_from_terms::<ANY, K, CONS, L>(ray, pb.slabs.lane(l), leaf, stack)?;
-                            Some((h.t, h))
-                        },
-                        #[inline(always)]
-                        |l, h| out.set(l, &self.hit_record(&h)),
-                    );
-                    return ANY && out.mask == pb.live;
-                }
-                self.leaf_packet::<ANY, K, L>(leaf, &rk, pb.tnear, pb.live, tfar, out)
-            },
-        );
+        walk_packet::<ANY, CONS, L>(self.tree(), &pb, stack, base, &mut tfar, |leaf, lanes, tfar, stack| {
+            if lanes != 0 {
+                // A few lanes walk this subtree one at a time.
+                out.mask |= each_lane_alone::<ANY, _>(
+                    p,
+                    lanes,
+                    tfar,
+                    |l, ray| {
+                        let h = self.trace1_from_terms::<ANY, K, CONS, L>(ray, pb.slabs.lane(l), leaf, stack)?;
+                        Some((h.t, h))
+                    },
+                    |l, h| out.set(l, &self.hit_record(&h)),
+                );
+                return ANY && out.mask == pb.live;
+            }
+            self.leaf_packet::<ANY, K, L>(leaf, &rk, pb.tnear, pb.live, tfar, out)
+        });
     }
 
     /// Tests the blocks of `leaf` against the open lanes of a packet (`tnear ≤ tfar`): lowers the

@@ -33,7 +33,6 @@ impl Bvh {
 
     /// [`each_hit`](Self::each_hit) with a chosen kernel, on `stack` above its current entries,
     /// for a valid ray with `tnear >= 0`.
-    #[inline(always)]
     pub(crate) fn each_hit_with<K: Kernel, const CONS: bool, L: Level>(
         &self,
         ray: &Ray,
@@ -49,30 +48,22 @@ impl Bvh {
         let br = BoxRay::with_terms(SlabTerms::of(ray), ray.tnear);
         // The walk's `tfar` stays the ray's: every subtree the ray enters is visited.
         let mut tfar = ray.tfar;
-        walk1::<false, CONS, L>(
-            self.tree(),
-            &br,
-            stack,
-            base,
-            &mut tfar,
-            #[inline(always)]
-            |leaf, tfar, _| {
-                let (start, count) = leaf_blocks(leaf);
-                for bi in start..start + count {
-                    let Some((valid, t, u, v)) = K::lanes1::<L>(&self.blocks[bi], &r4, &pre, ray.tnear, *tfar) else {
-                        continue;
-                    };
-                    let (t, u, v) = (t.to_array(), u.to_array(), v.to_array());
-                    let mut bits = valid.to_bitmask();
-                    while bits != 0 {
-                        let lane = bits.trailing_zeros() as usize;
-                        bits &= bits - 1;
-                        f(&LeafHit { block: bi as u32, lane: lane as u32, t: t[lane], u: u[lane], v: v[lane] });
-                    }
+        walk1::<false, CONS, L>(self.tree(), &br, stack, base, &mut tfar, |leaf, tfar, _| {
+            let (start, count) = leaf_blocks(leaf);
+            for bi in start..start + count {
+                let Some((valid, t, u, v)) = K::lanes1::<L>(&self.blocks[bi], &r4, &pre, ray.tnear, *tfar) else {
+                    continue;
+                };
+                let (t, u, v) = (t.to_array(), u.to_array(), v.to_array());
+                let mut bits = valid.to_bitmask();
+                while bits != 0 {
+                    let lane = bits.trailing_zeros() as usize;
+                    bits &= bits - 1;
+                    f(&LeafHit { block: bi as u32, lane: lane as u32, t: t[lane], u: u[lane], v: v[lane] });
                 }
-                false
-            },
-        );
+            }
+            false
+        });
     }
 }
 
@@ -98,28 +89,20 @@ impl InstancedScene {
         let br = BoxRay::with_terms(SlabTerms::of(ray), ray.tnear);
         let mut tfar = ray.tfar;
         let base = stack.push_root(root);
-        walk1::<false, CONS, L>(
-            self.top_tree(),
-            &br,
-            stack,
-            base,
-            &mut tfar,
-            #[inline(always)]
-            |leaf, _, stack| {
-                let (start, count) = leaf_blocks(leaf);
-                for k in start..start + count {
-                    let (object, r) = self.object_ray_of(k, ray);
-                    // Finite in, finite out, except where a huge scale overflows: such rays miss.
-                    if !(r.origin.is_finite() && r.dir.is_finite()) {
-                        continue;
-                    }
-                    let bvh = self.objects()[object as usize].bvh();
-                    bvh.each_hit_with::<K, CONS, L>(&r, stack, &mut |h| {
-                        f(&self.world_hit_of(k as u32, &bvh.hit_record(h)));
-                    });
+        walk1::<false, CONS, L>(self.top_tree(), &br, stack, base, &mut tfar, |leaf, _, stack| {
+            let (start, count) = leaf_blocks(leaf);
+            for k in start..start + count {
+                let (object, r) = self.object_ray_of(k, ray);
+                // Finite in, finite out, except where a huge scale overflows: such rays miss.
+                if !(r.origin.is_finite() && r.dir.is_finite()) {
+                    continue;
                 }
-                false
-            },
-        );
+                let bvh = self.objects()[object as usize].bvh();
+                bvh.each_hit_with::<K, CONS, L>(&r, stack, &mut |h| {
+                    f(&self.world_hit_of(k as u32, &bvh.hit_record(h)));
+                });
+            }
+            false
+        });
     }
 }

@@ -267,17 +267,11 @@ macro_rules! with_level {
         match $crate::simd::isa() {
             $crate::simd::Isa::Avx2 => {
                 type $l = $crate::simd::Avx2;
-                <$l as $crate::simd::Level>::call(
-                    #[inline(always)]
-                    || $body,
-                )
+                <$l as $crate::simd::Level>::call(|| $body)
             }
             _ => {
                 type $l = $crate::simd::Base;
-                <$l as $crate::simd::Level>::call(
-                    #[inline(always)]
-                    || $body,
-                )
+                <$l as $crate::simd::Level>::call(|| $body)
             }
         }
     };
