@@ -41,8 +41,6 @@ pub enum Error {
     ImageWrite { path: PathBuf, message: String },
     #[error("scene has {0} geometries; at most 2^32 - 1 are supported (2^29 with the Badouel test)")]
     TooManyGeometries(usize),
-    #[error("this processor cannot run the {0} kernels (see strahl::simd::Isa::supported)")]
-    UnsupportedIsa(&'static str),
     #[error("serialized scene: {0}")]
     Serialized(String),
 }

@@ -34,7 +34,7 @@ use crate::geometry::triangle::Kernel;
 use crate::geometry::watertight::Watertight;
 use crate::ray::{Hit, HitPacket, Ray, RayPacket};
 use crate::scene::{Query, Scene, each_hit};
-use crate::simd::{Level, Pf, lane_mask};
+use crate::simd::{Pf, lane_mask};
 
 /// One placement of an object: `object` indexes the objects of the [`InstancedScene`], and
 /// `transform` maps object space to world space.
@@ -300,13 +300,13 @@ impl InstancedScene {
         if self.root == EMPTY {
             return None;
         }
-        with_stack(|stack| dispatch!(self.test, self.box_test, |K, C, L| self.trace1_with::<ANY, K, C, L>(ray, stack)))
+        with_stack(|stack| dispatch!(self.test, self.box_test, |K, C| self.trace1_with::<ANY, K, C>(ray, stack)))
     }
 
     /// The instance level's walk; at each instance the object's walk continues on the same stack
     /// with the same kernel, so entering an instance costs one transform and no dispatch.
     /// Invalid rays miss.
-    fn trace1_with<const ANY: bool, K: Kernel, const CONS: bool, L: Level>(
+    fn trace1_with<const ANY: bool, K: Kernel, const CONS: bool>(
         &self,
         ray: &Ray,
         stack: &mut Stack,
@@ -317,24 +317,24 @@ impl InstancedScene {
         if !ray.is_valid() {
             return None;
         }
-        self.trace1_from::<ANY, K, CONS, L>(&ray.clamped_to_zero(), self.root, stack)
+        self.trace1_from::<ANY, K, CONS>(&ray.clamped_to_zero(), self.root, stack)
     }
 
     /// [`trace1_with`](Self::trace1_with) over the instance subtree at `root`.
     #[inline(always)]
-    fn trace1_from<const ANY: bool, K: Kernel, const CONS: bool, L: Level>(
+    fn trace1_from<const ANY: bool, K: Kernel, const CONS: bool>(
         &self,
         ray: &Ray,
         root: u32,
         stack: &mut Stack,
     ) -> Option<(u32, LeafHit)> {
-        self.trace1_from_terms::<ANY, K, CONS, L>(ray, SlabTerms::of(ray), root, stack)
+        self.trace1_from_terms::<ANY, K, CONS>(ray, SlabTerms::of(ray), root, stack)
     }
 
     /// [`trace1_from`](Self::trace1_from) with the ray's slab terms already computed (a packet's
     /// lane).
     #[inline(always)]
-    fn trace1_from_terms<const ANY: bool, K: Kernel, const CONS: bool, L: Level>(
+    fn trace1_from_terms<const ANY: bool, K: Kernel, const CONS: bool>(
         &self,
         ray: &Ray,
         terms: SlabTerms,
@@ -345,7 +345,7 @@ impl InstancedScene {
         let mut tfar = ray.tfar;
         let mut best = None;
         let base = stack.push_root(root);
-        walk1::<ANY, CONS, L>(self.instance_tree(), &br, stack, base, &mut tfar, |leaf, tfar, stack| {
+        walk1::<ANY, CONS>(self.instance_tree(), &br, stack, base, &mut tfar, |leaf, tfar, stack| {
             let (start, count) = leaf_blocks(leaf);
             for k in start..start + count {
                 let p = &self.placed[k];
@@ -354,8 +354,7 @@ impl InstancedScene {
                 if !(r.origin.is_finite() && r.dir.is_finite()) {
                     continue;
                 }
-                if let Some(h) = self.objects[p.object as usize].bvh().trace1_with::<ANY, false, K, CONS, L>(&r, stack)
-                {
+                if let Some(h) = self.objects[p.object as usize].bvh().trace1_with::<ANY, false, K, CONS>(&r, stack) {
                     *tfar = h.t;
                     best = Some((k as u32, h));
                     if ANY {
@@ -372,11 +371,11 @@ impl InstancedScene {
     /// that hit (are occluded).
     fn trace_packet<const ANY: bool>(&self, p: &RayPacket, hit: &mut HitPacket) -> u32 {
         with_stack(|stack| {
-            dispatch!(self.test, self.box_test, |K, C, L| self.trace_packet_with::<ANY, K, C, L>(p, hit, stack))
+            dispatch!(self.test, self.box_test, |K, C| self.trace_packet_with::<ANY, K, C>(p, hit, stack))
         })
     }
 
-    fn trace_packet_with<const ANY: bool, K: Kernel, const CONS: bool, L: Level>(
+    fn trace_packet_with<const ANY: bool, K: Kernel, const CONS: bool>(
         &self,
         p: &RayPacket,
         hit: &mut HitPacket,
@@ -395,7 +394,7 @@ impl InstancedScene {
         let spread = if !ANY && pb.frustum.is_none() { pb.origin_extent() } else { 0.0 };
         // One object's hits, before they are turned to world space.
         let mut r = HitPacket::default();
-        walk_packet::<ANY, CONS, L>(self.instance_tree(), &pb, stack, base, &mut tfar, |leaf, lanes, tfar, stack| {
+        walk_packet::<ANY, CONS>(self.instance_tree(), &pb, stack, base, &mut tfar, |leaf, lanes, tfar, stack| {
             if lanes != 0 {
                 // A few lanes walk this part of the instance tree one at a time.
                 out.mask |= each_lane_alone::<ANY, _>(
@@ -403,7 +402,7 @@ impl InstancedScene {
                     lanes,
                     tfar,
                     |l, ray| {
-                        let (k, h) = self.trace1_from_terms::<ANY, K, CONS, L>(ray, pb.slabs.lane(l), leaf, stack)?;
+                        let (k, h) = self.trace1_from_terms::<ANY, K, CONS>(ray, pb.slabs.lane(l), leaf, stack)?;
                         Some((h.t, (k, h)))
                     },
                     |l, (k, h)| out.set(l, &self.world_hit(k, &self.object_hit(k, &h))),
@@ -414,7 +413,7 @@ impl InstancedScene {
             for k in start..start + count {
                 let pl = &self.placed[k];
                 // Only the lanes that enter this instance's box go into the object.
-                let active = pb.lanes_in_box::<CONS, L>(pl.lo, pl.hi, *tfar) & pb.live;
+                let active = pb.lanes_in_box::<CONS>(pl.lo, pl.hi, *tfar) & pb.live;
                 if active == 0 {
                     continue;
                 }
@@ -434,14 +433,14 @@ impl InstancedScene {
                         active,
                         tfar,
                         |l, ray| {
-                            let h = bvh.trace1_from_terms::<false, K, CONS, L>(ray, qs.lane(l), bvh.root, stack)?;
+                            let h = bvh.trace1_from_terms::<false, K, CONS>(ray, qs.lane(l), bvh.root, stack)?;
                             Some((h.t, h))
                         },
                         |l, h| out.set(l, &self.world_hit(k as u32, &bvh.hit_record(&h))),
                     );
                     continue;
                 }
-                let mask = bvh.trace_packet_with::<ANY, K, CONS, L>(&q, &mut r, stack);
+                let mask = bvh.trace_packet_with::<ANY, K, CONS>(&q, &mut r, stack);
                 if mask == 0 {
                     continue;
                 }

@@ -56,26 +56,15 @@ impl Bvh {
     /// results were copied twice per group).
     pub(crate) fn trace_group(&self, ps: &[RayPacket; GROUP], hits: &mut [HitPacket; GROUP]) {
         with_stack(|stack| {
-            dispatch!(self.test, self.box_test, |K, C, L| {
+            dispatch!(self.test, self.box_test, |K, C| {
                 let mut out = hits.each_mut().map(PacketHits::new);
-                self.trace_group_with::<K, C, L>(ps, &mut out, stack)
+                self.trace_group_with::<K, C>(ps, &mut out, stack)
             })
         })
     }
 
-    #[inline(always)]
-    pub(crate) fn trace_group_with<K: Kernel, const CONS: bool, L: Level>(
-        &self,
-        ps: &[RayPacket; GROUP],
-        out: &mut [PacketHits<'_>; GROUP],
-        stack: &mut Stack,
-    ) {
-        // The walk's own function, compiled for `L` (and never inlined into its caller).
-        L::call(|| self.trace_group_with_in::<K, CONS, L>(ps, out, stack))
-    }
-
-    #[inline(always)]
-    pub(crate) fn trace_group_with_in<K: Kernel, const CONS: bool, L: Level>(
+    #[inline(never)]
+    pub(crate) fn trace_group_with<K: Kernel, const CONS: bool>(
         &self,
         ps: &[RayPacket; GROUP],
         out: &mut [PacketHits<'_>; GROUP],
@@ -116,7 +105,7 @@ impl Bvh {
         }
         let (Some(gf), true) = (group, shared) else {
             for (p, o) in ps.iter().zip(out.iter_mut()) {
-                self.trace_packet_from::<false, K, CONS, L>(p, self.root, o, stack);
+                self.trace_packet_from::<false, K, CONS>(p, self.root, o, stack);
             }
             return;
         };
@@ -128,12 +117,12 @@ impl Bvh {
                 if solo {
                     // The packet's own walk, with its per-lane mode below its footprint.
                     let p = RayPacket { tfar: tfar[s].to_array(), active: live[s], ..ps[s] };
-                    self.trace_packet_from::<false, K, CONS, L>(&p, r, &mut out[s], stack);
+                    self.trace_packet_from::<false, K, CONS>(&p, r, &mut out[s], stack);
                     let hit = out[s].mask;
                     tfar[s] =
                         Pf::new(std::array::from_fn(|l| if hit & (1 << l) != 0 { out[s].hit.t[l] } else { p.tfar[l] }));
                 } else {
-                    self.leaf_packet::<false, K, L>(r, &rk[s], rk[s].tnear, live[s], &mut tfar[s], &mut out[s]);
+                    self.leaf_packet::<false, K>(r, &rk[s], rk[s].tnear, live[s], &mut tfar[s], &mut out[s]);
                 }
             }
         });

@@ -37,8 +37,7 @@ impl Bvh {
     /// [`occluded_stream`](Self::occluded_stream) with this tree's kernels, on this thread's stack.
     pub(crate) fn occluded_octant(&self, rays: &RayStream, base: usize, ids: &[u16], octant: u32) -> u32 {
         with_stack(|stack| {
-            dispatch!(self.test, self.box_test, |K, C, L| self
-                .occluded_stream::<K, C, L>(rays, base, ids, octant, stack))
+            dispatch!(self.test, self.box_test, |K, C| self.occluded_stream::<K, C>(rays, base, ids, octant, stack))
         })
     }
 
@@ -47,21 +46,8 @@ impl Bvh {
     /// the direction octant `octant` (bit `a` set: the sign bit of component `a` is set, as in
     /// [`octant_of`]); a ray outside it is walked alone. Returns bit `i` set where ray `i` is
     /// occluded. Invalid rays are not occluded.
-    #[inline(always)]
-    pub(crate) fn occluded_stream<K: Kernel, const CONS: bool, L: Level>(
-        &self,
-        rays: &RayStream,
-        base: usize,
-        ids: &[u16],
-        octant: u32,
-        stack: &mut Stack,
-    ) -> u32 {
-        // The walk's own function, compiled for `L` (and never inlined into its caller).
-        L::call(|| self.occluded_stream_in::<K, CONS, L>(rays, base, ids, octant, stack))
-    }
-
-    #[inline(always)]
-    pub(crate) fn occluded_stream_in<K: Kernel, const CONS: bool, L: Level>(
+    #[inline(never)]
+    pub(crate) fn occluded_stream<K: Kernel, const CONS: bool>(
         &self,
         rays: &RayStream,
         base: usize,
@@ -98,7 +84,7 @@ impl Bvh {
             }
             let ray = ray.clamped_to_zero();
             if octant_of(&ray) != octant {
-                if self.trace1_with::<true, false, K, CONS, L>(&ray, stack).is_some() {
+                if self.trace1_with::<true, false, K, CONS>(&ray, stack).is_some() {
                     alone |= 1 << i;
                 }
                 continue;
@@ -111,7 +97,7 @@ impl Bvh {
             }
             sr.pad[i] = t.pad;
             sr.tnear[i] = ray.tnear;
-            sr.tfar_box[i] = t.far_limit::<CONS, L>(ray.tfar);
+            sr.tfar_box[i] = t.far_limit::<CONS>(ray.tfar);
             tfar[i] = ray.tfar;
             r4[i] = Ray4::new(ray.origin, ray.dir);
         }
@@ -149,11 +135,11 @@ impl Bvh {
                     let s = Nf::splat;
                     let (r0, r1, r2) = (s(sr.rd[0][i]), s(sr.rd[1][i]), s(sr.rd[2][i]));
                     let (o0, o1, o2) = (s(sr.od[0][i]), s(sr.od[1][i]), s(sr.od[2][i]));
-                    let n0 = L::msub(bn[0], r0, o0);
-                    let n1 = L::msub(bn[1], r1, o1);
-                    let n2 = L::msub(bn[2], r2, o2);
-                    let f = L::msub(bf[0], r0, o0).fast_min(L::msub(bf[1], r1, o1)).fast_min(L::msub(bf[2], r2, o2));
-                    let f = if CONS { L::madd(f, s(FAR_WIDEN), s(sr.pad[i])) } else { f };
+                    let n0 = bn[0].mul_sub(r0, o0);
+                    let n1 = bn[1].mul_sub(r1, o1);
+                    let n2 = bn[2].mul_sub(r2, o2);
+                    let f = bf[0].mul_sub(r0, o0).fast_min(bf[1].mul_sub(r1, o1)).fast_min(bf[2].mul_sub(r2, o2));
+                    let f = if CONS { f.mul_add(s(FAR_WIDEN), s(sr.pad[i])) } else { f };
                     let tn = n0.fast_max(n1).fast_max(n2.fast_max(s(sr.tnear[i])));
                     let tf = f.fast_min(s(sr.tfar_box[i]));
                     let entered: Ni = bytemuck::cast(tn.simd_le(tf));
@@ -184,7 +170,7 @@ impl Bvh {
                 let i = bits.trailing_zeros() as usize;
                 bits &= bits - 1;
                 for bi in start..start + count {
-                    if K::intersect1::<L>(&self.blocks[bi], &r4[i], &pre[i], sr.tnear[i], tfar[i]).is_some() {
+                    if K::intersect1(&self.blocks[bi], &r4[i], &pre[i], sr.tnear[i], tfar[i]).is_some() {
                         occluded |= 1 << i;
                         break;
                     }

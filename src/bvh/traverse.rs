@@ -326,12 +326,8 @@ pub(crate) fn with_stack<R>(f: impl FnOnce(&mut Stack) -> R) -> R {
 }
 
 /// Evaluates `$body` with `$k` bound to the kernel type and `$c` to the box-test flag of a
-/// `(TriangleTest, BoxTest)` pair, and `$l` to the active instruction-set [`Level`], compiled for
-/// that level: the one place the six monomorphized kernels and the levels are chosen.
+/// `(TriangleTest, BoxTest)` pair: the one place the six monomorphized kernels are chosen.
 macro_rules! dispatch {
-    ($test:expr, $boxes:expr, |$k:ident, $c:ident, $l:ident| $body:expr) => {
-        dispatch!($test, $boxes, |$k, $c| $crate::simd::with_level!(|$l| $body))
-    };
     ($test:expr, $boxes:expr, |$k:ident, $c:ident| $body:expr) => {
         match ($test, $boxes) {
             (TriangleTest::MollerTrumbore, BoxTest::Conservative) => dispatch!(@arm Moller, true, $k, $c, $body),
@@ -602,15 +598,14 @@ impl Bvh {
 
     /// The closest hit by testing every block, with this BVH's triangle test.
     pub fn brute_force(&self, ray: &Ray) -> Option<LeafHit> {
-        with_level!(|L| match self.test {
-            TriangleTest::MollerTrumbore => self.brute_force_k::<Moller, L>(ray),
-            TriangleTest::Badouel => self.brute_force_k::<Badouel, L>(ray),
-            TriangleTest::Watertight => self.brute_force_k::<Watertight, L>(ray),
-        })
+        match self.test {
+            TriangleTest::MollerTrumbore => self.brute_force_k::<Moller>(ray),
+            TriangleTest::Badouel => self.brute_force_k::<Badouel>(ray),
+            TriangleTest::Watertight => self.brute_force_k::<Watertight>(ray),
+        }
     }
 
-    #[inline(always)]
-    fn brute_force_k<K: Kernel, L: Level>(&self, ray: &Ray) -> Option<LeafHit> {
+    fn brute_force_k<K: Kernel>(&self, ray: &Ray) -> Option<LeafHit> {
         if !ray.is_valid() {
             return None;
         }
@@ -620,7 +615,7 @@ impl Bvh {
         let mut tfar = ray.tfar;
         let mut best = None;
         for (bi, b) in self.blocks.iter().enumerate() {
-            if let Some((lane, t, u, v)) = K::intersect1::<L>(b, &r4, &pre, ray.tnear, tfar) {
+            if let Some((lane, t, u, v)) = K::intersect1(b, &r4, &pre, ray.tnear, tfar) {
                 tfar = t;
                 best = Some(LeafHit { block: bi as u32, lane: lane as u32, t, u, v });
             }
@@ -634,26 +629,14 @@ impl Bvh {
         if self.root == EMPTY {
             return None;
         }
-        with_stack(|stack| {
-            dispatch!(self.test, self.box_test, |K, C, L| self.trace1_with::<ANY, true, K, C, L>(ray, stack))
-        })
+        with_stack(|stack| dispatch!(self.test, self.box_test, |K, C| self.trace1_with::<ANY, true, K, C>(ray, stack)))
     }
 
     /// [`trace1`](Self::trace1) with a chosen kernel, on `stack` above its current entries. With
     /// `CHECK` (the single-ray API) an invalid ray misses; without (an instance's object walk,
     /// a stream's lone ray), the caller has checked the ray.
-    #[inline(always)]
-    pub(crate) fn trace1_with<const ANY: bool, const CHECK: bool, K: Kernel, const CONS: bool, L: Level>(
-        &self,
-        ray: &Ray,
-        stack: &mut Stack,
-    ) -> Option<LeafHit> {
-        // The walk's own function, compiled for `L` (and never inlined into its caller).
-        L::call(|| self.trace1_with_in::<ANY, CHECK, K, CONS, L>(ray, stack))
-    }
-
-    #[inline(always)]
-    pub(crate) fn trace1_with_in<const ANY: bool, const CHECK: bool, K: Kernel, const CONS: bool, L: Level>(
+    #[inline(never)]
+    pub(crate) fn trace1_with<const ANY: bool, const CHECK: bool, K: Kernel, const CONS: bool>(
         &self,
         ray: &Ray,
         stack: &mut Stack,
@@ -665,25 +648,25 @@ impl Bvh {
         if CHECK && !ray.is_valid() {
             return None;
         }
-        self.trace1_from::<ANY, K, CONS, L>(&ray.clamped_to_zero(), self.root, stack)
+        self.trace1_from::<ANY, K, CONS>(&ray.clamped_to_zero(), self.root, stack)
     }
 
     /// [`trace1_with`](Self::trace1_with) over the subtree at `root` (a node or a leaf): the
     /// whole tree, or the part a packet hands to its few lanes that enter it.
     #[inline(always)]
-    pub(crate) fn trace1_from<const ANY: bool, K: Kernel, const CONS: bool, L: Level>(
+    pub(crate) fn trace1_from<const ANY: bool, K: Kernel, const CONS: bool>(
         &self,
         ray: &Ray,
         root: u32,
         stack: &mut Stack,
     ) -> Option<LeafHit> {
-        self.trace1_from_terms::<ANY, K, CONS, L>(ray, SlabTerms::of(ray), root, stack)
+        self.trace1_from_terms::<ANY, K, CONS>(ray, SlabTerms::of(ray), root, stack)
     }
 
     /// [`trace1_from`](Self::trace1_from) with the ray's slab terms already computed (a packet's
     /// lane, see [`LaneSlabs`]).
     #[inline(always)]
-    pub(crate) fn trace1_from_terms<const ANY: bool, K: Kernel, const CONS: bool, L: Level>(
+    pub(crate) fn trace1_from_terms<const ANY: bool, K: Kernel, const CONS: bool>(
         &self,
         ray: &Ray,
         terms: SlabTerms,
@@ -699,10 +682,10 @@ impl Bvh {
         let br = BoxRay::with_terms(terms, ray.tnear);
         let mut tfar = ray.tfar;
         let mut best = None;
-        walk1::<ANY, CONS, L>(self.tree(), &br, stack, base, &mut tfar, |leaf, tfar, _| {
+        walk1::<ANY, CONS>(self.tree(), &br, stack, base, &mut tfar, |leaf, tfar, _| {
             let (start, count) = leaf_blocks(leaf);
             for bi in start..start + count {
-                if let Some((lane, t, u, v)) = K::intersect1::<L>(&self.blocks[bi], &r4, &pre, ray.tnear, *tfar) {
+                if let Some((lane, t, u, v)) = K::intersect1(&self.blocks[bi], &r4, &pre, ray.tnear, *tfar) {
                     *tfar = t;
                     best = Some(LeafHit { block: bi as u32, lane: lane as u32, t, u, v });
                     if ANY {
@@ -721,32 +704,21 @@ impl Bvh {
     /// occluded).
     pub fn trace_packet<const ANY: bool>(&self, p: &RayPacket, hit: &mut HitPacket) -> u32 {
         with_stack(|stack| {
-            dispatch!(self.test, self.box_test, |K, C, L| self.trace_packet_with::<ANY, K, C, L>(p, hit, stack))
+            dispatch!(self.test, self.box_test, |K, C| self.trace_packet_with::<ANY, K, C>(p, hit, stack))
         })
     }
 
     /// [`trace_packet`](Self::trace_packet) with a chosen kernel, on `stack` above its current
     /// entries.
-    #[inline(always)]
-    pub(crate) fn trace_packet_with<const ANY: bool, K: Kernel, const CONS: bool, L: Level>(
-        &self,
-        p: &RayPacket,
-        hit: &mut HitPacket,
-        stack: &mut Stack,
-    ) -> u32 {
-        // The walk's own function, compiled for `L` (and never inlined into its caller).
-        L::call(|| self.trace_packet_with_in::<ANY, K, CONS, L>(p, hit, stack))
-    }
-
-    #[inline(always)]
-    pub(crate) fn trace_packet_with_in<const ANY: bool, K: Kernel, const CONS: bool, L: Level>(
+    #[inline(never)]
+    pub(crate) fn trace_packet_with<const ANY: bool, K: Kernel, const CONS: bool>(
         &self,
         p: &RayPacket,
         hit: &mut HitPacket,
         stack: &mut Stack,
     ) -> u32 {
         let mut out = PacketHits::new(hit);
-        self.trace_packet_from::<ANY, K, CONS, L>(p, self.root, &mut out, stack);
+        self.trace_packet_from::<ANY, K, CONS>(p, self.root, &mut out, stack);
         out.mask
     }
 
@@ -754,7 +726,7 @@ impl Bvh {
     /// leaf), recording in `out` the hits closer than the lanes' `tfar`: the whole tree, or the
     /// part a coherent group hands to one packet.
     #[inline(always)]
-    pub(crate) fn trace_packet_from<const ANY: bool, K: Kernel, const CONS: bool, L: Level>(
+    pub(crate) fn trace_packet_from<const ANY: bool, K: Kernel, const CONS: bool>(
         &self,
         p: &RayPacket,
         root: u32,
@@ -769,7 +741,7 @@ impl Bvh {
         };
         let base = stack.push_root(root);
         let rk = RayK { o: pb.o, d: pb.d, tnear: pb.tnear };
-        walk_packet::<ANY, CONS, L>(self.tree(), &pb, stack, base, &mut tfar, |leaf, lanes, tfar, stack| {
+        walk_packet::<ANY, CONS>(self.tree(), &pb, stack, base, &mut tfar, |leaf, lanes, tfar, stack| {
             if lanes != 0 {
                 // A few lanes walk this subtree one at a time.
                 out.mask |= each_lane_alone::<ANY, _>(
@@ -777,14 +749,14 @@ impl Bvh {
                     lanes,
                     tfar,
                     |l, ray| {
-                        let h = self.trace1_from_terms::<ANY, K, CONS, L>(ray, pb.slabs.lane(l), leaf, stack)?;
+                        let h = self.trace1_from_terms::<ANY, K, CONS>(ray, pb.slabs.lane(l), leaf, stack)?;
                         Some((h.t, h))
                     },
                     |l, h| out.set(l, &self.hit_record(&h)),
                 );
                 return ANY && out.mask == pb.live;
             }
-            self.leaf_packet::<ANY, K, L>(leaf, &rk, pb.tnear, pb.live, tfar, out)
+            self.leaf_packet::<ANY, K>(leaf, &rk, pb.tnear, pb.live, tfar, out)
         });
     }
 
@@ -792,7 +764,7 @@ impl Bvh {
     /// lanes' `tfar` to their hits (closes them, `ANY`) and records the hits in `out`. Returns
     /// true once every `live` lane is occluded (`ANY`).
     #[inline(always)]
-    pub(super) fn leaf_packet<const ANY: bool, K: Kernel, L: Level>(
+    pub(super) fn leaf_packet<const ANY: bool, K: Kernel>(
         &self,
         leaf: u32,
         rk: &RayK,
@@ -809,7 +781,7 @@ impl Bvh {
                 if blk.prim[lane] == u32::MAX {
                     break;
                 }
-                let (valid, t, u, v) = K::intersect_packet::<L>(blk, lane, rk, *tfar, active);
+                let (valid, t, u, v) = K::intersect_packet(blk, lane, rk, *tfar, active);
                 let bits = valid.to_bitmask();
                 if bits == 0 {
                     continue;
@@ -883,8 +855,8 @@ impl SlabTerms {
     /// The far distance a slab test compares with for a closest hit so far at `tfar`: widened by
     /// the rounding bound for the conservative test.
     #[inline(always)]
-    pub(super) fn far_limit<const CONS: bool, L: Level>(&self, tfar: f32) -> f32 {
-        if CONS { L::madd(tfar, FAR_WIDEN, self.pad) } else { tfar }
+    pub(super) fn far_limit<const CONS: bool>(&self, tfar: f32) -> f32 {
+        if CONS { tfar.mul_add(FAR_WIDEN, self.pad) } else { tfar }
     }
 }
 
@@ -915,21 +887,21 @@ impl BoxRay {
     /// itself dropped children the widened test had entered, whose hits lay within `tfar` (found
     /// by the differential fuzz target: occlusion found a hit closest hit missed).
     #[inline(always)]
-    pub(crate) fn pop_limit<const CONS: bool, L: Level>(&self, tfar: f32) -> f32 {
-        if CONS { L::madd(tfar, FAR_WIDEN, self.far_pad) } else { tfar }
+    pub(crate) fn pop_limit<const CONS: bool>(&self, tfar: f32) -> f32 {
+        if CONS { tfar.mul_add(FAR_WIDEN, self.far_pad) } else { tfar }
     }
 
     /// The children of `node` the ray enters before `tfar`, and the entry distance of each.
     #[inline(always)]
-    fn test<const CONS: bool, L: Level>(&self, node: &Node, tfar: f32) -> (u32, Nf) {
+    fn test<const CONS: bool>(&self, node: &Node, tfar: f32) -> (u32, Nf) {
         let b = &node.bounds;
-        let near = |a: usize| L::msub(Nf::new(b[self.near[a]]), self.rd[a], self.od[a]);
+        let near = |a: usize| Nf::new(b[self.near[a]]).mul_sub(self.rd[a], self.od[a]);
         let (n0, n1, n2) = (near(0), near(1), near(2));
         let (f0, f1, f2, tf) = if CONS {
-            let far = |a: usize| L::msub(Nf::new(b[self.far[a]]), self.rdf[a], self.odf[a]);
-            (far(0), far(1), far(2), Nf::splat(self.pop_limit::<CONS, L>(tfar)))
+            let far = |a: usize| Nf::new(b[self.far[a]]).mul_sub(self.rdf[a], self.odf[a]);
+            (far(0), far(1), far(2), Nf::splat(self.pop_limit::<CONS>(tfar)))
         } else {
-            let far = |a: usize| L::msub(Nf::new(b[self.far[a]]), self.rd[a], self.od[a]);
+            let far = |a: usize| Nf::new(b[self.far[a]]).mul_sub(self.rd[a], self.od[a]);
             (far(0), far(1), far(2), Nf::splat(tfar))
         };
         if self.int_ok {
@@ -969,7 +941,7 @@ impl Bvh {
 /// `leaf(reference, tfar)` tests one leaf, may lower `tfar`, and returns true to end the walk (an
 /// any-hit query found its hit). Shared by triangle BVHs and the instance level above them.
 #[inline(always)]
-pub(crate) fn walk1<const ANY: bool, const CONS: bool, L: Level>(
+pub(crate) fn walk1<const ANY: bool, const CONS: bool>(
     tree: Tree<'_>,
     br: &BoxRay,
     stack: &mut Stack,
@@ -982,7 +954,7 @@ pub(crate) fn walk1<const ANY: bool, const CONS: bool, L: Level>(
     'pop: while sp > base {
         let (mut cur, dist) = stack.take(&mut sp);
         // Skip subtrees entered beyond the closest hit so far (by the node test's own bound).
-        if dist > br.pop_limit::<CONS, L>(*tfar) {
+        if dist > br.pop_limit::<CONS>(*tfar) {
             continue;
         }
         loop {
@@ -996,7 +968,7 @@ pub(crate) fn walk1<const ANY: bool, const CONS: bool, L: Level>(
                 continue 'pop;
             }
             let node = &nodes[cur as usize];
-            let (mask, tn) = br.test::<CONS, L>(node, *tfar);
+            let (mask, tn) = br.test::<CONS>(node, *tfar);
             if mask == 0 {
                 continue 'pop;
             }
@@ -1131,17 +1103,17 @@ impl PacketBoxes {
     /// The lanes that enter the box `lo..hi` before their `tfar` (the per-lane slab test, with the
     /// conservative widening if `CONS`).
     #[inline(always)]
-    pub fn lanes_in_box<const CONS: bool, L: Level>(&self, lo: [f32; 3], hi: [f32; 3], tfar: Pf) -> u32 {
-        self.enter::<CONS, L>(lo, hi, tfar).0
+    pub fn lanes_in_box<const CONS: bool>(&self, lo: [f32; 3], hi: [f32; 3], tfar: Pf) -> u32 {
+        self.enter::<CONS>(lo, hi, tfar).0
     }
 
     /// The lanes that enter the box `lo..hi` before their `tfar`, and each lane's entry distance
     /// (`+inf` in the others).
     #[inline(always)]
-    fn enter<const CONS: bool, L: Level>(&self, lo: [f32; 3], hi: [f32; 3], tfar: Pf) -> (u32, Pf) {
+    fn enter<const CONS: bool>(&self, lo: [f32; 3], hi: [f32; 3], tfar: Pf) -> (u32, Pf) {
         let slab = |a: usize| {
-            let t0 = L::msub(Pf::splat(lo[a]), self.slabs.rd[a], self.slabs.od[a]);
-            let t1 = L::msub(Pf::splat(hi[a]), self.slabs.rd[a], self.slabs.od[a]);
+            let t0 = Pf::splat(lo[a]).mul_sub(self.slabs.rd[a], self.slabs.od[a]);
+            let t1 = Pf::splat(hi[a]).mul_sub(self.slabs.rd[a], self.slabs.od[a]);
             (t0, t1)
         };
         let ((x0, x1), (y0, y1), (z0, z1)) = (slab(0), slab(1), slab(2));
@@ -1154,7 +1126,7 @@ impl PacketBoxes {
         } else {
             x0.fast_min(x1).fast_max(y0.fast_min(y1)).fast_max(z0.fast_min(z1).fast_max(self.tnear))
         };
-        let tf = if CONS { L::madd(tf, Pf::splat(FAR_WIDEN), self.slabs.pad) } else { tf };
+        let tf = if CONS { tf.mul_add(Pf::splat(FAR_WIDEN), self.slabs.pad) } else { tf };
         let mask = if self.int_ok { tn.le_mask(tf) } else { tn.simd_le(tf) };
         (mask.to_bitmask(), mask.select(tn, Pf::splat(f32::INFINITY)))
     }
@@ -1206,7 +1178,7 @@ const SINGLE_SWITCH: u32 = 4;
 /// packet, and with the few `lanes` that entered a subtree (a node or a leaf) to walk it one ray
 /// at a time; it may lower the lanes' `tfar` and returns true to end the walk.
 #[inline(always)]
-pub(crate) fn walk_packet<const ANY: bool, const CONS: bool, L: Level>(
+pub(crate) fn walk_packet<const ANY: bool, const CONS: bool>(
     tree: Tree<'_>,
     pb: &PacketBoxes,
     stack: &mut Stack,
@@ -1223,7 +1195,7 @@ pub(crate) fn walk_packet<const ANY: bool, const CONS: bool, L: Level>(
     let pop_limit = |tfar_max: f32, dist: f32| {
         if CONS { tfar_max + (tfar_max.abs() + dist.abs()) * (2.0 * WIDEN) + max_pad } else { tfar_max }
     };
-    let lane_limit = |tfar: Pf| if CONS { L::madd(tfar, Pf::splat(FAR_WIDEN), pb.slabs.pad) } else { tfar };
+    let lane_limit = |tfar: Pf| if CONS { tfar.mul_add(Pf::splat(FAR_WIDEN), pb.slabs.pad) } else { tfar };
     // Camera packets (with a frustum) never switch to single rays; their entries' lane masks are
     // not kept.
     let switch = pb.frustum.is_none();
@@ -1284,11 +1256,8 @@ pub(crate) fn walk_packet<const ANY: bool, const CONS: bool, L: Level>(
                     small &= small - 1;
                     if !is_leaf(child[i]) {
                         child[i] |= LANE_MODE;
-                    } else if pb.lanes_in_box::<CONS, L>(
-                        [b[0][i], b[2][i], b[4][i]],
-                        [b[1][i], b[3][i], b[5][i]],
-                        *tfar,
-                    ) == 0
+                    } else if pb.lanes_in_box::<CONS>([b[0][i], b[2][i], b[4][i]], [b[1][i], b[3][i], b[5][i]], *tfar)
+                        == 0
                     {
                         mask &= !(1 << i);
                     }
@@ -1313,7 +1282,7 @@ pub(crate) fn walk_packet<const ANY: bool, const CONS: bool, L: Level>(
                 if c == EMPTY {
                     break;
                 }
-                let (m, tn) = pb.enter::<CONS, L>([b[0][i], b[2][i], b[4][i]], [b[1][i], b[3][i], b[5][i]], *tfar);
+                let (m, tn) = pb.enter::<CONS>([b[0][i], b[2][i], b[4][i]], [b[1][i], b[3][i], b[5][i]], *tfar);
                 if m != 0 {
                     if far_memory {
                         if !is_leaf(c) {

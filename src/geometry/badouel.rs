@@ -56,7 +56,7 @@ impl Kernel for Badouel {
     fn pre(_: &Ray4) {}
 
     #[inline(always)]
-    fn lanes1<L: Level>(b: &TriBlock, r: &Ray4, _: &(), tnear: f32, tfar: f32) -> Option<BlockHits> {
+    fn lanes1(b: &TriBlock, r: &Ray4, _: &(), tnear: f32, tfar: f32) -> Option<BlockHits> {
         // Per lane, the ray's components along k, u = k + 1 and v = k + 2.
         let kf = f32x4::new(std::array::from_fn(|l| (b.aux(l) & 3) as f32));
         let (k0, k1) = (kf.simd_eq(f32x4::splat(0.0)), kf.simd_eq(f32x4::splat(1.0)));
@@ -85,7 +85,7 @@ impl Kernel for Badouel {
     }
 
     #[inline(always)]
-    fn intersect_packet<L: Level>(b: &TriBlock, lane: usize, r: &RayK, tfar: Pf, active: Pf) -> (Pf, Pf, Pf, Pf) {
+    fn intersect_packet(b: &TriBlock, lane: usize, r: &RayK, tfar: Pf, active: Pf) -> (Pf, Pf, Pf, Pf) {
         let k = ((b.aux(lane) & 3) as usize).min(2);
         let (u, v) = ((k + 1) % 3, (k + 2) % 3);
         let s = |i: usize| Pf::splat(b.rows[i][lane]);

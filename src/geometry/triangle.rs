@@ -167,24 +167,18 @@ pub(crate) trait Kernel {
     /// Every triangle of a block one ray hits in `(tnear, tfar]`: the valid lanes (all bits set)
     /// with their `t`, `u`, `v`; `None` where no lane can hit. Lanes outside the mask hold
     /// anything.
-    fn lanes1<L: Level>(b: &TriBlock, r: &Ray4, pre: &Self::Pre, tnear: f32, tfar: f32) -> Option<BlockHits>;
+    fn lanes1(b: &TriBlock, r: &Ray4, pre: &Self::Pre, tnear: f32, tfar: f32) -> Option<BlockHits>;
 
     /// The nearest hit of one ray among the triangles of a block in `(tnear, tfar]`, as
     /// `(lane, t, u, v)`; among equal distances the lowest lane wins.
     #[inline(always)]
-    fn intersect1<L: Level>(
-        b: &TriBlock,
-        r: &Ray4,
-        pre: &Self::Pre,
-        tnear: f32,
-        tfar: f32,
-    ) -> Option<(usize, f32, f32, f32)> {
-        Self::lanes1::<L>(b, r, pre, tnear, tfar).and_then(|(valid, t, u, v)| nearest(valid, t, u, v))
+    fn intersect1(b: &TriBlock, r: &Ray4, pre: &Self::Pre, tnear: f32, tfar: f32) -> Option<(usize, f32, f32, f32)> {
+        Self::lanes1(b, r, pre, tnear, tfar).and_then(|(valid, t, u, v)| nearest(valid, t, u, v))
     }
 
     /// The lanes of a packet (within `active`) hitting triangle `lane` of `b` in `(tnear, tfar]`,
     /// with their `t`, `u`, `v`.
-    fn intersect_packet<L: Level>(b: &TriBlock, lane: usize, r: &RayK, tfar: Pf, active: Pf) -> (Pf, Pf, Pf, Pf);
+    fn intersect_packet(b: &TriBlock, lane: usize, r: &RayK, tfar: Pf, active: Pf) -> (Pf, Pf, Pf, Pf);
 }
 
 /// The last checks of a hit whose depth test passed in its scaled form (`tnear·|den| < t·|den|`):
@@ -239,34 +233,33 @@ pub(crate) fn nearest(valid: f32x4, t: f32x4, u: f32x4, v: f32x4) -> Option<(usi
 /// `a × b` in Embree's form (`vec3.h`): `msub(a.y, b.z, a.z·b.y)` per component, fused where the
 /// CPU has FMA: three multiplies and three fused operations instead of six and three.
 #[inline(always)]
-pub(crate) fn cross<L: Level, T: Fusable>(a: [T; 3], b: [T; 3]) -> [T; 3] {
-    [L::msub(a[1], b[2], a[2] * b[1]), L::msub(a[2], b[0], a[0] * b[2]), L::msub(a[0], b[1], a[1] * b[0])]
+pub(crate) fn cross<T: Fma>(a: [T; 3], b: [T; 3]) -> [T; 3] {
+    [a[1].msub(b[2], a[2] * b[1]), a[2].msub(b[0], a[0] * b[2]), a[0].msub(b[1], a[1] * b[0])]
 }
 
 /// `a · b` in Embree's form: `madd(a.x, b.x, madd(a.y, b.y, a.z·b.z))`.
 #[inline(always)]
-pub(crate) fn dot<L: Level, T: Fusable>(a: [T; 3], b: [T; 3]) -> T {
-    L::madd(a[0], b[0], L::madd(a[1], b[1], a[2] * b[2]))
+pub(crate) fn dot<T: Fma>(a: [T; 3], b: [T; 3]) -> T {
+    a[0].madd(b[0], a[1].madd(b[1], a[2] * b[2]))
 }
 
 /// One ray against one triangle with `test`: `(t, u, v)` in `(tnear, tfar]`, as the BVH's leaves
 /// compute it (used to measure per-triangle behaviour, e.g. double hits on shared edges).
 pub fn intersect_triangle(test: TriangleTest, ray: &crate::ray::Ray, tri: [Vec3; 3]) -> Option<(f32, f32, f32)> {
     use super::{badouel::Badouel, moeller::Moller, watertight::Watertight};
-    #[inline(always)]
-    fn run<K: Kernel, L: Level>(b: &TriBlock, ray: &crate::ray::Ray) -> Option<(f32, f32, f32)> {
+    fn run<K: Kernel>(b: &TriBlock, ray: &crate::ray::Ray) -> Option<(f32, f32, f32)> {
         let r = Ray4::new(ray.origin, ray.dir);
-        K::intersect1::<L>(b, &r, &K::pre(&r), ray.tnear, ray.tfar).map(|(_, t, u, v)| (t, u, v))
+        K::intersect1(b, &r, &K::pre(&r), ray.tnear, ray.tfar).map(|(_, t, u, v)| (t, u, v))
     }
     if !ray.is_valid() {
         return None;
     }
     let b = TriBlock::new(test, &[(0, 0, tri)]);
-    with_level!(|L| match test {
-        TriangleTest::MollerTrumbore => run::<Moller, L>(&b, ray),
-        TriangleTest::Badouel => run::<Badouel, L>(&b, ray),
-        TriangleTest::Watertight => run::<Watertight, L>(&b, ray),
-    })
+    match test {
+        TriangleTest::MollerTrumbore => run::<Moller>(&b, ray),
+        TriangleTest::Badouel => run::<Badouel>(&b, ray),
+        TriangleTest::Watertight => run::<Watertight>(&b, ray),
+    }
 }
 
 /// Float64 Möller–Trumbore without range checks, `(t, [w0, w1, w2])` (weights of v0, v1, v2), or
@@ -296,17 +289,13 @@ mod tests {
     use super::*;
     use crate::ray::PACKET_WIDTH;
 
-    /// The kernels' unit tests run at the baseline level; the scene-level tests run at each level
-    /// the machine has (`STRAHL_ISA`, `.ci/run`).
-    type L = crate::simd::Base;
-
     fn block1(test: TriangleTest, a: Vec3, b: Vec3, c: Vec3) -> TriBlock {
         TriBlock::new(test, &[(0, 7, [a, b, c])])
     }
 
     fn one<K: Kernel>(b: &TriBlock, o: Vec3, d: Vec3, tnear: f32, tfar: f32) -> Option<(usize, f32, f32, f32)> {
         let r = Ray4::new(o, d);
-        K::intersect1::<L>(b, &r, &K::pre(&r), tnear, tfar)
+        K::intersect1(b, &r, &K::pre(&r), tnear, tfar)
     }
 
     fn each(f: impl Fn(TriangleTest, &dyn Fn(&TriBlock, Vec3, Vec3, f32, f32) -> Option<(usize, f32, f32, f32)>)) {
@@ -370,7 +359,7 @@ mod tests {
             tnear: Pf::splat(0.0),
         };
         let all = Pf::splat(0.0).simd_eq(Pf::splat(0.0));
-        let (valid, t, _, _) = K::intersect_packet::<L>(&blk, 0, &rk, Pf::splat(f32::INFINITY), all);
+        let (valid, t, _, _) = K::intersect_packet(&blk, 0, &rk, Pf::splat(f32::INFINITY), all);
         let (bits, t) = (valid.to_bitmask(), t.to_array());
         let mut hits = 0;
         for i in 0..PACKET_WIDTH {

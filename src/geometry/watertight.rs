@@ -67,7 +67,7 @@ impl Kernel for Watertight {
     }
 
     #[inline(always)]
-    fn lanes1<L: Level>(b: &TriBlock, r: &Ray4, sh: &Shear, tnear: f32, tfar: f32) -> Option<BlockHits> {
+    fn lanes1(b: &TriBlock, r: &Ray4, sh: &Shear, tnear: f32, tfar: f32) -> Option<BlockHits> {
         let [kx, ky, kz] = sh.k;
         let rel = |first: usize| -> [f32x4; 3] { std::array::from_fn(|a| f32x4::new(b.rows[first + a]) - r.o[a]) };
         let (a, bb, c) = (rel(0), rel(3), rel(6));
@@ -108,7 +108,7 @@ impl Kernel for Watertight {
     /// All lanes at once: each lane's axis permutation and shear are selected by mask, so the
     /// arithmetic is the single-ray form's, operation for operation (bit-identical results).
     #[inline(always)]
-    fn intersect_packet<L: Level>(b: &TriBlock, lane: usize, r: &RayK, tfar: Pf, active: Pf) -> (Pf, Pf, Pf, Pf) {
+    fn intersect_packet(b: &TriBlock, lane: usize, r: &RayK, tfar: Pf, active: Pf) -> (Pf, Pf, Pf, Pf) {
         let zero = Pf::splat(0.0);
         let d = &r.d;
         let ad = [d[0].abs(), d[1].abs(), d[2].abs()];

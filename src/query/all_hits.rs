@@ -16,7 +16,6 @@ use crate::geometry::triangle::{Kernel, Ray4};
 use crate::geometry::watertight::Watertight;
 use crate::instance::InstancedScene;
 use crate::ray::{Hit, Ray};
-use crate::simd::Level;
 
 impl Bvh {
     /// Calls `f` for every triangle `ray` hits in `(tnear, tfar]`, in no particular order (a
@@ -26,14 +25,12 @@ impl Bvh {
             return;
         }
         let ray = ray.clamped_to_zero();
-        with_stack(|stack| {
-            dispatch!(self.test, self.box_test, |K, C, L| self.each_hit_with::<K, C, L>(&ray, stack, &mut f))
-        })
+        with_stack(|stack| dispatch!(self.test, self.box_test, |K, C| self.each_hit_with::<K, C>(&ray, stack, &mut f)))
     }
 
     /// [`each_hit`](Self::each_hit) with a chosen kernel, on `stack` above its current entries,
     /// for a valid ray with `tnear >= 0`.
-    pub(crate) fn each_hit_with<K: Kernel, const CONS: bool, L: Level>(
+    pub(crate) fn each_hit_with<K: Kernel, const CONS: bool>(
         &self,
         ray: &Ray,
         stack: &mut Stack,
@@ -48,10 +45,10 @@ impl Bvh {
         let br = BoxRay::with_terms(SlabTerms::of(ray), ray.tnear);
         // The walk's `tfar` stays the ray's: every subtree the ray enters is visited.
         let mut tfar = ray.tfar;
-        walk1::<false, CONS, L>(self.tree(), &br, stack, base, &mut tfar, |leaf, tfar, _| {
+        walk1::<false, CONS>(self.tree(), &br, stack, base, &mut tfar, |leaf, tfar, _| {
             let (start, count) = leaf_blocks(leaf);
             for bi in start..start + count {
-                let Some((valid, t, u, v)) = K::lanes1::<L>(&self.blocks[bi], &r4, &pre, ray.tnear, *tfar) else {
+                let Some((valid, t, u, v)) = K::lanes1(&self.blocks[bi], &r4, &pre, ray.tnear, *tfar) else {
                     continue;
                 };
                 let (t, u, v) = (t.to_array(), u.to_array(), v.to_array());
@@ -76,20 +73,15 @@ impl InstancedScene {
         }
         let ray = ray.clamped_to_zero();
         let (test, box_test) = self.tests();
-        with_stack(|stack| dispatch!(test, box_test, |K, C, L| self.each_hit_with::<K, C, L>(&ray, stack, &mut f)))
+        with_stack(|stack| dispatch!(test, box_test, |K, C| self.each_hit_with::<K, C>(&ray, stack, &mut f)))
     }
 
-    fn each_hit_with<K: Kernel, const CONS: bool, L: Level>(
-        &self,
-        ray: &Ray,
-        stack: &mut Stack,
-        f: &mut impl FnMut(&Hit),
-    ) {
+    fn each_hit_with<K: Kernel, const CONS: bool>(&self, ray: &Ray, stack: &mut Stack, f: &mut impl FnMut(&Hit)) {
         let Some(root) = self.top_root() else { return };
         let br = BoxRay::with_terms(SlabTerms::of(ray), ray.tnear);
         let mut tfar = ray.tfar;
         let base = stack.push_root(root);
-        walk1::<false, CONS, L>(self.top_tree(), &br, stack, base, &mut tfar, |leaf, _, stack| {
+        walk1::<false, CONS>(self.top_tree(), &br, stack, base, &mut tfar, |leaf, _, stack| {
             let (start, count) = leaf_blocks(leaf);
             for k in start..start + count {
                 let (object, r) = self.object_ray_of(k, ray);
@@ -98,7 +90,7 @@ impl InstancedScene {
                     continue;
                 }
                 let bvh = self.objects()[object as usize].bvh();
-                bvh.each_hit_with::<K, CONS, L>(&r, stack, &mut |h| {
+                bvh.each_hit_with::<K, CONS>(&r, stack, &mut |h| {
                     f(&self.world_hit_of(k as u32, &bvh.hit_record(h)));
                 });
             }

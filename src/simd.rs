@@ -1,19 +1,15 @@
 //! The one place that names SIMD lane types and touches processor state.
 //!
-//! Every other module imports its lane types from here, so that switching the lane types or the
-//! packet width is a change to this folder alone. The lane types ([`lanes`]) are plain arrays
-//! that take the vector width of the function they are inlined into; the kernels are compiled
-//! once per instruction set and chosen at run time ([`dispatch`]).
+//! Every other module imports its lane types from here, so that switching the lane library or the
+//! packet width is a change to this file alone. The kernels are written against `wide`, which turns
+//! `f32x8`/`f32x16` into AVX2/AVX-512 instructions when the crate is built with the CPU's features
+//! (`.cargo/config.toml` sets `-C target-cpu=native`); without them they fall back to narrower code
+//! that gives the same answers.
 #![allow(unsafe_code)]
 
-mod dispatch;
-mod lanes;
-
-pub(crate) use bytemuck;
-pub(crate) use dispatch::{Avx2, Base, Fusable, Level, with_level};
-pub use dispatch::{Isa, isa, set_isa};
-use lanes::i32x16;
-pub(crate) use lanes::{f32x4, f32x8, f32x16, i32x8};
+use wide::i32x16;
+pub(crate) use wide::{bytemuck, i32x8};
+pub(crate) use wide::{f32x4, f32x8, f32x16};
 
 /// Asks the processor to bring the cache lines of `*p` (up to 256 bytes) into the L1 cache: a hint
 /// that does not change what the program computes.
@@ -103,6 +99,29 @@ pub(crate) type Nf = f32x8;
 /// [`Nf`]'s integer twin.
 pub(crate) type Ni = i32x8;
 
+/// Fused multiply-add on lane vectors: `madd(a, b, c) = a·b + c`, `msub(a, b, c) = a·b − c`, one
+/// rounding each where the CPU has FMA (Embree's `madd`/`msub`).
+pub(crate) trait Fma: Copy + core::ops::Mul<Output = Self> {
+    fn madd(self, b: Self, c: Self) -> Self;
+    fn msub(self, b: Self, c: Self) -> Self;
+}
+
+macro_rules! fma {
+    ($($f:ty),*) => {$(
+        impl Fma for $f {
+            #[inline(always)]
+            fn madd(self, b: Self, c: Self) -> Self {
+                self.mul_add(b, c)
+            }
+            #[inline(always)]
+            fn msub(self, b: Self, c: Self) -> Self {
+                self.mul_sub(b, c)
+            }
+        }
+    )*};
+}
+fma!(f32x4, f32x8, f32x16);
+
 /// Lane count of a ray packet (K in Embree's naming): 16 rays, a 4×4 pixel tile.
 pub const PACKET_WIDTH: usize = 16;
 
@@ -127,19 +146,42 @@ pub(crate) fn lane_mask(bits: u32) -> Pf {
 /// lanes).
 #[inline(always)]
 pub(crate) fn hmin(x: Pf) -> f32 {
-    // Pairwise halving in registers: log₂ 16 = 4 dependent steps instead of 16 (the shuffles
-    // become `vextractf128`/`vpermilps`).
-    let a = x.to_array();
-    let m: [f32; 8] = core::array::from_fn(|i| if a[i] < a[i + 8] { a[i] } else { a[i + 8] });
-    let m: [f32; 4] = core::array::from_fn(|i| if m[i] < m[i + 4] { m[i] } else { m[i + 4] });
-    let m: [f32; 2] = core::array::from_fn(|i| if m[i] < m[i + 2] { m[i] } else { m[i + 2] });
-    if m[0] < m[1] { m[0] } else { m[1] }
+    #[cfg(all(target_arch = "x86_64", target_feature = "avx512f"))]
+    {
+        use core::arch::x86_64::{__m512, _mm512_reduce_min_ps};
+        // In registers (`vextractf64x4`, `vshufps`, `vminps`), where the halving below went
+        // through memory twice: 2–6% on packets (PERFORMANCE.md).
+        // SAFETY: `Pf` is sixteen `f32` lanes in 64 bytes, in lane order, as `__m512` is; the
+        // target feature of this block guarantees the instructions.
+        unsafe { _mm512_reduce_min_ps(core::mem::transmute::<Pf, __m512>(x)) }
+    }
+    #[cfg(not(all(target_arch = "x86_64", target_feature = "avx512f")))]
+    {
+        // Pairwise halving: log₂ 16 = 4 dependent steps instead of 16.
+        let a = x.to_array();
+        let (lo, hi) = a.split_at(8);
+        let m = f32x8::new(lo.try_into().unwrap_or([0.0; 8])).fast_min(f32x8::new(hi.try_into().unwrap_or([0.0; 8])));
+        let m = m.to_array();
+        let (lo, hi) = m.split_at(4);
+        let m = f32x4::new(lo.try_into().unwrap_or([0.0; 4])).fast_min(f32x4::new(hi.try_into().unwrap_or([0.0; 4])));
+        let m = m.to_array();
+        m[0].min(m[1]).min(m[2].min(m[3]))
+    }
 }
 
 /// Largest lane of a packet vector (see [`hmin`]).
 #[inline(always)]
 pub(crate) fn hmax(x: Pf) -> f32 {
-    -hmin(-x)
+    #[cfg(all(target_arch = "x86_64", target_feature = "avx512f"))]
+    {
+        use core::arch::x86_64::{__m512, _mm512_reduce_max_ps};
+        // SAFETY: as in `hmin`.
+        unsafe { _mm512_reduce_max_ps(core::mem::transmute::<Pf, __m512>(x)) }
+    }
+    #[cfg(not(all(target_arch = "x86_64", target_feature = "avx512f")))]
+    {
+        -hmin(-x)
+    }
 }
 
 /// Truncates four floats to integers in one instruction (`cvttps2dq`). Out-of-range and NaN lanes
@@ -212,21 +254,46 @@ pub fn flush_denormals_enabled() -> bool {
     }
 }
 
-/// Smallest lane of a four-lane vector, in registers (two shuffles and `vminps`): a block
+/// Smallest lane of a four-lane vector, in registers (two `vpermilps` and `vminps`): a block
 /// test's nearest hit, which the halving through a store and reloads made wait on the way to the
 /// next node test (PERFORMANCE.md). NaN lanes must not occur.
 #[inline(always)]
 pub(crate) fn min4(t: f32x4) -> f32 {
-    let a = t.to_array();
-    let m = t.fast_min(f32x4::new([a[2], a[3], a[0], a[1]])).to_array();
-    let m = f32x4::new(m).fast_min(f32x4::new([m[1], m[0], m[3], m[2]]));
-    m.to_array()[0]
+    #[cfg(all(target_arch = "x86_64", target_feature = "avx"))]
+    {
+        use core::arch::x86_64::{__m128, _mm_cvtss_f32, _mm_min_ps, _mm_permute_ps};
+        // SAFETY: `f32x4` and `__m128` are four `f32` lanes in 16 bytes, in lane order; the target
+        // feature of this block guarantees the instructions.
+        unsafe {
+            let x = core::mem::transmute::<f32x4, __m128>(t);
+            let m = _mm_min_ps(x, _mm_permute_ps::<0b01_00_11_10>(x));
+            let m = _mm_min_ps(m, _mm_permute_ps::<0b10_11_00_01>(m));
+            _mm_cvtss_f32(m)
+        }
+    }
+    #[cfg(not(all(target_arch = "x86_64", target_feature = "avx")))]
+    {
+        let a = t.to_array();
+        a[0].min(a[1]).min(a[2].min(a[3]))
+    }
 }
 
-/// Lane `l` (taken modulo 4) of a four-lane vector.
+/// Lane `l` of a four-lane vector, moved to the low lane in registers (`vpermilps`).
 #[inline(always)]
 pub(crate) fn lane4(x: f32x4, l: usize) -> f32 {
-    x.to_array()[l & 3]
+    #[cfg(all(target_arch = "x86_64", target_feature = "avx"))]
+    {
+        use core::arch::x86_64::{__m128, _mm_cvtsi32_si128, _mm_cvtss_f32, _mm_permutevar_ps};
+        // SAFETY: as in `min4`; the index vector's low lane selects lane `l & 3`.
+        unsafe {
+            let v = core::mem::transmute::<f32x4, __m128>(x);
+            _mm_cvtss_f32(_mm_permutevar_ps(v, _mm_cvtsi32_si128((l & 3) as i32)))
+        }
+    }
+    #[cfg(not(all(target_arch = "x86_64", target_feature = "avx")))]
+    {
+        x.to_array()[l & 3]
+    }
 }
 
 #[cfg(test)]
