@@ -8,10 +8,13 @@ use crate::ray::Ray;
 /// A pinhole camera with a square field of view.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Camera {
+    /// Where the camera sits.
     pub eye: Vec3,
     /// Unit forward, right and up vectors.
     pub forward: Vec3,
+    /// Unit right vector.
     pub right: Vec3,
+    /// Unit up vector.
     pub up: Vec3,
     /// `tan(fov / 2)`.
     pub tan_half_fov: f32,

@@ -40,11 +40,14 @@ use crate::simd::{Pf, lane_mask};
 /// `transform` maps object space to world space.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Instance {
+    /// Index of the placed object in the objects the scene was built from.
     pub object: usize,
+    /// Object-to-world transform: finite and invertible.
     pub transform: Affine3A,
 }
 
 impl Instance {
+    /// Places `object` by `transform`.
     pub fn new(object: usize, transform: Affine3A) -> Self {
         Self { object, transform }
     }
@@ -74,6 +77,7 @@ pub struct InstancedStats {
     pub top_build_ms: f64,
     /// Wall time of the object builds.
     pub objects_build_ms: f64,
+    /// Instances in the scene.
     pub instances: usize,
     /// Triangles over all instances, counted once per instance (what the world shows).
     pub instanced_triangles: u64,
@@ -243,14 +247,17 @@ impl InstancedScene {
         Ok(Self { objects, instances, nodes, root, placed, bounds, test, box_test, stats })
     }
 
+    /// The objects, each a flat scene in its own space.
     pub fn objects(&self) -> &[Scene] {
         &self.objects
     }
 
+    /// The instances, in the order given (their index is `Hit::inst_id`).
     pub fn instances(&self) -> &[Instance] {
         &self.instances
     }
 
+    /// Build statistics: times, sizes, counts.
     pub fn stats(&self) -> &InstancedStats {
         &self.stats
     }

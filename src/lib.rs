@@ -25,6 +25,7 @@
 //!
 //! See `ARCHITECTURE.md` for the data flow and where each part lives.
 #![deny(unsafe_code)]
+#![warn(missing_docs)]
 // SoA kernels index several parallel arrays by one lane or axis index; iterators would obscure that.
 #![allow(clippy::needless_range_loop)]
 

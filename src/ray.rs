@@ -14,7 +14,9 @@ pub use crate::simd::PACKET_WIDTH;
 /// One ray.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Ray {
+    /// Where the ray starts.
     pub origin: Vec3,
+    /// Its direction: any length (hit distances are in its units), not zero.
     pub dir: Vec3,
     /// Start of the segment (exclusive); negative values count as 0.
     pub tnear: f32,
@@ -106,6 +108,7 @@ pub struct Hit {
     pub t: f32,
     /// Barycentric coordinates: the hit point is `(1 − u − v)·v0 + u·v1 + v·v2`.
     pub u: f32,
+    /// Barycentric `v` per ray (see [`Hit::v`]).
     pub v: f32,
     /// Unnormalized geometric normal `(v1 − v0) × (v2 − v0)` in world space.
     pub ng: Vec3,
@@ -128,13 +131,21 @@ pub const INVALID_ID: u32 = u32::MAX;
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(64))]
 pub struct RayPacket {
+    /// Origin x per ray.
     pub ox: [f32; PACKET_WIDTH],
+    /// Origin y per ray.
     pub oy: [f32; PACKET_WIDTH],
+    /// Origin z per ray.
     pub oz: [f32; PACKET_WIDTH],
+    /// Direction x per ray (not necessarily normalized).
     pub dx: [f32; PACKET_WIDTH],
+    /// Direction y per ray.
     pub dy: [f32; PACKET_WIDTH],
+    /// Direction z per ray.
     pub dz: [f32; PACKET_WIDTH],
+    /// Start of each segment (exclusive); negative values count as 0.
     pub tnear: [f32; PACKET_WIDTH],
+    /// End of each segment (inclusive).
     pub tfar: [f32; PACKET_WIDTH],
     /// Bit `i` set: lane `i` takes part in the query.
     pub active: u32,
@@ -202,14 +213,23 @@ impl RayPacket {
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(64))]
 pub struct HitPacket {
+    /// Hit distance per ray, in units of its direction; `+inf` for a miss.
     pub t: [f32; PACKET_WIDTH],
+    /// Barycentric `u` per ray (see [`Hit::u`]).
     pub u: [f32; PACKET_WIDTH],
+    /// Barycentric `v` per ray (see [`Hit::v`]).
     pub v: [f32; PACKET_WIDTH],
+    /// Unnormalized geometric normal, x, per ray.
     pub ng_x: [f32; PACKET_WIDTH],
+    /// Unnormalized geometric normal, y, per ray.
     pub ng_y: [f32; PACKET_WIDTH],
+    /// Unnormalized geometric normal, z, per ray.
     pub ng_z: [f32; PACKET_WIDTH],
+    /// Triangle index per ray, [`INVALID_ID`] for a miss.
     pub prim_id: [u32; PACKET_WIDTH],
+    /// Geometry index per ray, [`INVALID_ID`] for a miss.
     pub geom_id: [u32; PACKET_WIDTH],
+    /// Instance index per ray, [`INVALID_ID`] for a miss or a flat scene.
     pub inst_id: [u32; PACKET_WIDTH],
 }
 
@@ -270,13 +290,21 @@ impl HitPacket {
 /// Any number of rays in SoA form: one vector per component.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct RayStream {
+    /// Origin x per ray.
     pub ox: Vec<f32>,
+    /// Origin y per ray.
     pub oy: Vec<f32>,
+    /// Origin z per ray.
     pub oz: Vec<f32>,
+    /// Direction x per ray (not necessarily normalized).
     pub dx: Vec<f32>,
+    /// Direction y per ray.
     pub dy: Vec<f32>,
+    /// Direction z per ray.
     pub dz: Vec<f32>,
+    /// Start of each segment (exclusive); negative values count as 0.
     pub tnear: Vec<f32>,
+    /// End of each segment (inclusive).
     pub tfar: Vec<f32>,
 }
 
@@ -305,6 +333,7 @@ impl RayStream {
         .unwrap_or(0)
     }
 
+    /// Whether there are none.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }
@@ -318,6 +347,7 @@ impl RayStream {
         self.tfar.clear();
     }
 
+    /// Appends `r`.
     pub fn push(&mut self, r: &Ray) {
         self.ox.push(r.origin.x);
         self.oy.push(r.origin.y);
@@ -427,14 +457,23 @@ impl FromIterator<Ray> for RayStream {
 /// Closest hits of a [`RayStream`] in SoA form (misses as in [`HitPacket`]).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct HitStream {
+    /// Hit distance per ray, in units of its direction; `+inf` for a miss.
     pub t: Vec<f32>,
+    /// Barycentric `u` per ray (see [`Hit::u`]).
     pub u: Vec<f32>,
+    /// Barycentric `v` per ray (see [`Hit::v`]).
     pub v: Vec<f32>,
+    /// Unnormalized geometric normal, x, per ray.
     pub ng_x: Vec<f32>,
+    /// Unnormalized geometric normal, y, per ray.
     pub ng_y: Vec<f32>,
+    /// Unnormalized geometric normal, z, per ray.
     pub ng_z: Vec<f32>,
+    /// Triangle index per ray, [`INVALID_ID`] for a miss.
     pub prim_id: Vec<u32>,
+    /// Geometry index per ray, [`INVALID_ID`] for a miss.
     pub geom_id: Vec<u32>,
+    /// Instance index per ray, [`INVALID_ID`] for a miss or a flat scene.
     pub inst_id: Vec<u32>,
 }
 
@@ -454,10 +493,12 @@ impl HitStream {
         }
     }
 
+    /// The number of rays (or hits).
     pub fn len(&self) -> usize {
         self.t.len()
     }
 
+    /// Whether there are none.
     pub fn is_empty(&self) -> bool {
         self.t.is_empty()
     }

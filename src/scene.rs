@@ -68,6 +68,7 @@ impl Scene {
         Self::build(load_obj(path)?, config)
     }
 
+    /// The meshes the scene was built from (their index is `Hit::geom_id`).
     pub fn meshes(&self) -> &[TriangleMesh] {
         &self.meshes
     }
@@ -77,6 +78,7 @@ impl Scene {
         (self.bvh.test, self.bvh.box_test)
     }
 
+    /// Build statistics: time, sizes, counts, SAH cost.
     pub fn stats(&self) -> &BuildStats {
         &self.bvh.stats
     }

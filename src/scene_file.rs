@@ -79,8 +79,11 @@ fn sphere_triangles(stacks: u32, slices: u32) -> u64 {
 /// The camera of a scene file.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CameraSpec {
+    /// Where the camera sits.
     pub eye: Vec3,
+    /// The point it looks at.
     pub look_at: Vec3,
+    /// Its up direction.
     pub up: Vec3,
     /// The benchmark camera's field of view (both ways) and the pinhole's horizontal one.
     pub fov_deg: f32,
@@ -114,8 +117,11 @@ pub struct MeshShading {
 /// The `[render]` table: image size, sampling, recursion and environment.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RenderSpec {
+    /// Image size, sampling and recursion limits.
     pub settings: Settings,
+    /// Ambient light.
     pub ambient: Vec3,
+    /// Radiance of rays that leave the scene.
     pub background: Vec3,
 }
 
@@ -131,16 +137,38 @@ pub enum MeshSource {
     /// An OBJ file (resolved against the scene file's folder); one geometry per object/group.
     Obj(PathBuf),
     /// [`procedural::sphereflake`].
-    Sphereflake { levels: u32, stacks: u32, slices: u32 },
+    Sphereflake {
+        /// Recursion levels.
+        levels: u32,
+        /// Stacks per sphere.
+        stacks: u32,
+        /// Slices per sphere.
+        slices: u32,
+    },
     /// [`procedural::uv_sphere`] at the origin.
-    Sphere { radius: f32, stacks: u32, slices: u32 },
+    Sphere {
+        /// Radius.
+        radius: f32,
+        /// Stacks.
+        stacks: u32,
+        /// Slices.
+        slices: u32,
+    },
     /// An OBJ file read with its material libraries and texture coordinates (`mtl = true`): one
     /// geometry per object/group and material.
     ObjWithMaterials(PathBuf),
     /// [`procedural::cuboid`]: an axis-aligned box, 12 triangles.
-    Box { min: Vec3, max: Vec3 },
+    Box {
+        /// Lowest corner.
+        min: Vec3,
+        /// Highest corner.
+        max: Vec3,
+    },
     /// [`procedural::quad`]: a rectangle in the plane y = 0 facing +y, centred on the origin.
-    Quad { size: [f32; 2] },
+    Quad {
+        /// Extent along x and z.
+        size: [f32; 2],
+    },
 }
 
 impl MeshSource {
@@ -164,11 +192,15 @@ impl MeshSource {
 /// A parsed and checked scene file: named meshes, instances of them, camera and lights.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SceneFile {
+    /// The file the scene was read from.
     pub path: PathBuf,
     /// Mesh names and sources, in name order; instances refer to them by index.
     pub meshes: Vec<(String, MeshSource)>,
+    /// Placements of the meshes.
     pub instances: Vec<Instance>,
+    /// The camera, if the file has one.
     pub camera: Option<CameraSpec>,
+    /// The lights.
     pub lights: Vec<Light>,
     /// Materials: index 0 is the default [`Material`], then the `[material.*]` tables in name
     /// order.
@@ -177,6 +209,7 @@ pub struct SceneFile {
     pub mesh_shading: Vec<MeshShading>,
     /// Per instance: the material overriding its mesh's, if any.
     pub instance_materials: Vec<Option<u32>>,
+    /// Render settings.
     pub render: RenderSpec,
 }
 

@@ -33,8 +33,11 @@ pub struct BuildStats {
     pub triangles: usize,
     /// Triangles left out: NaN/infinite corners or zero area. They can never be hit.
     pub skipped_triangles: usize,
+    /// Inner nodes of the tree.
     pub inner_nodes: usize,
+    /// Leaves of the tree.
     pub leaves: usize,
+    /// Triangle blocks (of 4 lanes) in the leaves.
     pub blocks: usize,
     /// Triangle references in leaves: `triangles`, plus the copies spatial splits made.
     pub references: usize,
@@ -43,6 +46,7 @@ pub struct BuildStats {
     pub sah: f64,
     /// Bytes of nodes plus triangle blocks.
     pub bytes: usize,
+    /// `bytes` per hittable triangle.
     pub bytes_per_triangle: f64,
     /// Wide levels from the root to the deepest leaf.
     pub depth: usize,

@@ -43,8 +43,10 @@ pub enum BoxTest {
 }
 
 impl BoxTest {
+    /// Every box test.
     pub const ALL: [BoxTest; 2] = [BoxTest::Fast, BoxTest::Conservative];
 
+    /// The test's name, as the harness and scene files spell it.
     pub fn name(self) -> &'static str {
         match self {
             BoxTest::Fast => "fast",

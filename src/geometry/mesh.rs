@@ -20,6 +20,7 @@ pub const MAX_COORDINATE: f32 = (1u64 << 40) as f32;
 /// [`MAX_COORDINATE`] later ([`map_positions`](Self::map_positions)).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct TriangleMesh {
+    /// The mesh's name (the OBJ object or group, or the caller's).
     pub name: String,
     positions: Vec<Vec3>,
     indices: Vec<[u32; 3]>,
@@ -65,14 +66,17 @@ impl TriangleMesh {
         Self::new(name, p, i)
     }
 
+    /// The vertex positions.
     pub fn positions(&self) -> &[Vec3] {
         &self.positions
     }
 
+    /// The triangles, as three vertex indices each.
     pub fn indices(&self) -> &[[u32; 3]] {
         &self.indices
     }
 
+    /// The number of triangles (hittable or not).
     pub fn triangle_count(&self) -> usize {
         self.indices.len()
     }

@@ -31,8 +31,10 @@ pub enum TriangleTest {
 }
 
 impl TriangleTest {
+    /// Every triangle test.
     pub const ALL: [TriangleTest; 3] = [TriangleTest::MollerTrumbore, TriangleTest::Badouel, TriangleTest::Watertight];
 
+    /// The test's name, as the harness and scene files spell it.
     pub fn name(self) -> &'static str {
         match self {
             TriangleTest::MollerTrumbore => "moller_trumbore",

@@ -16,7 +16,9 @@ const CHUNK: usize = 256;
 /// `ray_splits`). With `merge`, each ray's hits are its [`crossings`](SpatialQuery::crossings),
 /// otherwise its [`all_hits`](SpatialQuery::all_hits).
 pub struct HitLists {
+    /// Ray `i`'s hits are `hits[splits[i]..splits[i + 1]]` (length rays + 1).
     pub splits: Vec<usize>,
+    /// Every ray's hits, ray after ray, nearest first.
     pub hits: Vec<Hit>,
 }
 

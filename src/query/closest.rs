@@ -20,10 +20,13 @@ pub struct ClosestPoint {
     pub distance: f32,
     /// Barycentric coordinates of `point` on its triangle (as [`Hit`](crate::Hit)'s `u`, `v`).
     pub u: f32,
+    /// Barycentric coordinate of `v2`.
     pub v: f32,
     /// The triangle's unnormalized geometric normal `(v1 − v0) × (v2 − v0)` in world space.
     pub ng: Vec3,
+    /// The triangle's index within its geometry.
     pub prim_id: u32,
+    /// The geometry's index.
     pub geom_id: u32,
     /// The instance, or [`INVALID_ID`] in a flat scene.
     pub inst_id: u32,

@@ -1,7 +1,7 @@
 //! Queries beyond the closest and any hit, for the people who ask a scene more than "what does
 //! this ray hit first": every hit along a ray, the crossings of a surface counted once each, the
 //! nearest surface point, inside/outside and signed distance. Implemented by the flat
-//! [`Scene`](crate::Scene) and the two-level [`InstancedScene`](crate::InstancedScene); the
+//! [`Scene`] and the two-level [`InstancedScene`]; the
 //! parallel batch forms over slices are in [`batch`].
 //!
 //! ```

@@ -12,12 +12,21 @@ use crate::ray::Ray;
 pub enum Projection {
     /// The lecture's ideal pinhole camera: an image plane at distance 1 whose width spans
     /// `fov_deg` horizontally (POV-Ray's `angle`); the height follows from the aspect ratio.
-    Pinhole { fov_deg: f32 },
+    Pinhole {
+        /// Field of view in degrees.
+        fov_deg: f32,
+    },
     /// Parallel rays along the view direction from a window `width` scene units wide.
-    Orthographic { width: f32 },
+    Orthographic {
+        /// Window width in scene units.
+        width: f32,
+    },
     /// Equidistant fisheye: the angle from the view axis grows linearly with the distance from
     /// the image centre, reaching `fov_deg / 2` on the inscribed circle (up to 360°).
-    Fisheye { fov_deg: f32 },
+    Fisheye {
+        /// Field of view in degrees.
+        fov_deg: f32,
+    },
     /// POV-Ray's `omnimax`: a 180° dome projection, its axis shifted towards the bottom for wide
     /// images, nothing more than 45° below the axis (POV-Ray 3.7 `tracepixel.cpp`).
     Omnimax,
@@ -29,11 +38,15 @@ pub enum Projection {
 /// A camera: position, orthonormal frame and projection.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RenderCamera {
+    /// Where the camera sits.
     pub eye: Vec3,
     /// Unit view direction, right and up vectors (right-handed: `right = forward × up`).
     pub forward: Vec3,
+    /// Unit right vector.
     pub right: Vec3,
+    /// Unit up vector.
     pub up: Vec3,
+    /// How pixels map to directions.
     pub projection: Projection,
 }
 

@@ -9,8 +9,11 @@ use crate::error::{Error, Result};
 /// A linear-RGB image, row by row from the top-left pixel.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Image {
+    /// Width in pixels.
     pub width: u32,
+    /// Height in pixels.
     pub height: u32,
+    /// Linear RGB radiance, row by row from the top.
     pub pixels: Vec<Vec3>,
 }
 

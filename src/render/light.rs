@@ -16,18 +16,40 @@ pub enum LightKind {
     /// Radiates equally in all directions from `Light::position`.
     Point,
     /// Parallel light travelling along the unit `direction` (the sun); `position` unused.
-    Directional { direction: Vec3 },
+    Directional {
+        /// Unit direction the light travels in.
+        direction: Vec3,
+    },
     /// A point light limited to a cone about the unit `direction`: full intensity within
     /// `cos_inner` of the axis, none beyond `cos_outer`, a smoothstep between (POV-Ray's
     /// `radius` and `falloff`).
-    Spot { direction: Vec3, cos_inner: f32, cos_outer: f32 },
+    Spot {
+        /// Unit direction of the cone's axis.
+        direction: Vec3,
+        /// Cosine of the full-intensity half angle.
+        cos_inner: f32,
+        /// Cosine of the cut-off half angle.
+        cos_outer: f32,
+    },
     /// A rectangle centred on `Light::position` with edge vectors `u` and `v`, sampled on an
     /// `n[0] × n[1]` grid of strata, each jittered; every sample an omnidirectional point light
     /// of `color / (n[0]·n[1])` (POV-Ray's `area_light u, v, n0, n1 jitter`).
-    Rect { u: Vec3, v: Vec3, n: [u32; 2] },
+    Rect {
+        /// First edge vector.
+        u: Vec3,
+        /// Second edge vector.
+        v: Vec3,
+        /// Strata along `u` and `v`.
+        n: [u32; 2],
+    },
     /// A disc of `radius` centred on `Light::position`, turned to face each lit point, sampled on
     /// `n` jittered strata (polar, equal area) (POV-Ray's `area_light … circular orient`).
-    Sphere { radius: f32, n: u32 },
+    Sphere {
+        /// Radius.
+        radius: f32,
+        /// Number of strata.
+        n: u32,
+    },
 }
 
 /// A light source.
@@ -37,6 +59,7 @@ pub struct Light {
     pub position: Vec3,
     /// Colour times intensity.
     pub color: Vec3,
+    /// Point, directional, spot or area light.
     pub kind: LightKind,
     /// POV-Ray's `fade_distance` with `fade_power 2`: intensity `2 / (1 + (d / fade)²)` at distance
     /// `d`; `None`: no fall-off with distance.

@@ -22,10 +22,18 @@ pub enum FresnelMode {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Texture {
     /// Solid 3-D checkerboard of cubes `size` wide: the material's diffuse colour and `other`.
-    Checker { other: Vec3, size: f32 },
+    Checker {
+        /// The second colour.
+        other: Vec3,
+        /// Edge length of the cubes.
+        size: f32,
+    },
     /// Image `index` of the world's textures, at the surface's texture coordinates, times the
     /// diffuse colour (OBJ `map_Kd` times `Kd`); surfaces without coordinates get the colour.
-    Image { index: u32 },
+    Image {
+        /// Index into the world's textures.
+        index: u32,
+    },
 }
 
 /// A material: Phong's local model plus the recursion's reflection and transmission.
@@ -37,6 +45,7 @@ pub struct Material {
     pub diffuse: Vec3,
     /// Phong specular reflectance `k_s` and exponent `n`.
     pub specular: Vec3,
+    /// Phong exponent `n`.
     pub shininess: f32,
     /// Mirror reflection `r_s`.
     pub reflect: Vec3,
@@ -46,7 +55,9 @@ pub struct Material {
     pub ior: f32,
     /// Beer–Lambert absorption coefficient α per unit distance inside the medium, per channel.
     pub absorption: Vec3,
+    /// How reflection and transmission weights follow the angle (exact Fresnel, Schlick, or fixed).
     pub fresnel: FresnelMode,
+    /// A texture replacing the diffuse colour, if any.
     pub texture: Option<Texture>,
 }
 

@@ -50,7 +50,9 @@ pub const MAX_DEPTH: u32 = 64;
 /// Image size, sampling and recursion limits.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Settings {
+    /// Image width in pixels (at least 1).
     pub width: u32,
+    /// Image height in pixels (at least 1).
     pub height: u32,
     /// Samples per pixel: 1 traces the pixel centre; more are stratified and jittered.
     pub spp: u32,
@@ -97,10 +99,13 @@ impl Settings {
 /// environment.
 #[derive(Clone, Debug)]
 pub struct World {
+    /// Per hit: material, shading normal and texture coordinates.
     pub surfaces: Surfaces,
+    /// The materials surfaces refer to by index.
     pub materials: Vec<Material>,
     /// Image textures, named by [`Texture::Image`] materials.
     pub textures: Vec<texture::ImageTexture>,
+    /// The light sources.
     pub lights: Vec<Light>,
     /// Ambient light, times each material's `ambient · diffuse`.
     pub ambient: Vec3,
@@ -151,13 +156,17 @@ impl World {
 pub struct RenderStats {
     /// Rays traced, by [`RayKind`] (primary, shadow, reflected, refracted).
     pub rays: [u64; 4],
+    /// Secondary rays not traced because their path weight fell below the bailout.
     pub counts_cut_by_weight: u64,
+    /// Secondary rays not traced because the path reached the maximum depth.
     pub counts_cut_by_depth: u64,
+    /// Refractions that became total internal reflections.
     pub total_internal_reflections: u64,
     /// Wall time of the whole render.
     pub seconds: f64,
     /// Thread time (summed over the worker threads) in the queries, and in shading.
     pub trace_seconds: f64,
+    /// Thread time in shading and ray generation.
     pub shade_seconds: f64,
     /// Worker threads of the render.
     pub threads: u32,
@@ -195,10 +204,15 @@ impl RenderStats {
 /// One ray of a pixel's ray tree.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct TreeNode {
+    /// Index of the ray this one was spawned by; `None` for the primary ray.
     pub parent: Option<usize>,
+    /// Primary, shadow, reflected or refracted.
     pub kind: RayKind,
+    /// Recursion depth: 0 for the primary ray.
     pub depth: u32,
+    /// Where the ray starts.
     pub origin: [f32; 3],
+    /// Its direction.
     pub dir: [f32; 3],
     /// Where the ray stopped, in units of `dir`: its hit (or, for a shadow feeler, its blocker),
     /// `None` for a miss or an unblocked feeler.
@@ -231,9 +245,13 @@ pub const WAVE: usize = 4096;
 
 /// A renderer over query backend `Q`.
 pub struct Renderer<'a, Q: Query> {
+    /// The intersection backend.
     pub query: &'a Q,
+    /// Surfaces, materials, textures and lights.
     pub world: &'a World,
+    /// The camera.
     pub camera: RenderCamera,
+    /// Image size, sampling and recursion limits.
     pub settings: Settings,
 }
 

@@ -19,9 +19,13 @@ pub const MAX_MEDIA: usize = 4;
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum RayKind {
+    /// A camera ray.
     Primary,
+    /// A shadow feeler towards a light.
     Shadow,
+    /// A mirror reflection.
     Reflected,
+    /// A refracted (transmitted) ray.
     Refracted,
 }
 
@@ -58,9 +62,13 @@ impl Media {
 /// contributes, its depth and the media it travels in.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Path {
+    /// The pixel the path contributes to (`y·width + x`).
     pub pixel: u32,
+    /// Recursion depth of the path's next ray.
     pub depth: u32,
+    /// The product of the reflection and transmission weights so far.
     pub weight: Vec3,
+    /// The stack of media the ray travels in (for refraction and absorption).
     pub media: Media,
     /// Seeds the path's random choices (area lights' jitter): made from the pixel and sample
     /// of the camera ray, then from the parent's seed and the child's kind, so every backend and
@@ -90,9 +98,23 @@ pub enum Emission {
     /// Light reaching the pixel directly: ambient, background, already weighted.
     Radiance(Vec3),
     /// A shadow feeler towards light `light`: if it is not occluded, `radiance` reaches the pixel.
-    Shadow { ray: Ray, radiance: Vec3, light: u32 },
+    Shadow {
+        /// The feeler: from the hit point to the light.
+        ray: Ray,
+        /// What reaches the pixel if the feeler is unoccluded.
+        radiance: Vec3,
+        /// Index of the light.
+        light: u32,
+    },
     /// A reflected or refracted ray to trace next.
-    Child { ray: Ray, path: Path, kind: RayKind },
+    Child {
+        /// The ray to trace.
+        ray: Ray,
+        /// Its path: pixel, depth, weight and media.
+        path: Path,
+        /// Reflected or refracted.
+        kind: RayKind,
+    },
 }
 
 /// Counters of one shading call.
@@ -286,7 +308,12 @@ pub enum ShadowStep {
     /// A transparent surface: the feeler goes on from just behind it to the same end, its light
     /// filtered by the surface's `transmit` colour (POV-Ray's filtered shadows: no refraction,
     /// no caustics, no absorption along the way).
-    Through { ray: Ray, radiance: Vec3 },
+    Through {
+        /// The feeler's continuation behind the surface.
+        ray: Ray,
+        /// The light it carries, filtered so far.
+        radiance: Vec3,
+    },
 }
 
 /// The next step of the shadow feeler `ray` carrying `radiance`, which hit `hit`.

@@ -48,6 +48,7 @@ pub struct SurfacePoint {
     pub ns: Vec3,
     /// Texture coordinates, where the mesh has them.
     pub uv: Option<Vec2>,
+    /// Index of the surface's material.
     pub material: u32,
 }
 

@@ -13,8 +13,11 @@ pub const MAX_TEXTURE_BYTES: u64 = 256 << 20;
 /// A texture in linear RGB, row by row from the top-left texel (image order).
 #[derive(Clone, Debug, PartialEq)]
 pub struct ImageTexture {
+    /// Width in texels.
     pub width: u32,
+    /// Height in texels.
     pub height: u32,
+    /// Linear RGB texels, row by row from the top.
     pub texels: Vec<Vec3>,
 }
 
