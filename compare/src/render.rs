@@ -7,10 +7,14 @@
 //! thread-local buffers reused across calls) and call `rtcIntersect1M`/`rtcOccluded1M` with the
 //! coherent flag for camera rays and the incoherent one otherwise, and write the answers back.
 //! The conversion is part of Embree's time here, as reading the stream is part of strahl's.
+//! [`EmbreeBackend::set_packets`] switches the streams to `rtcIntersect16`/`rtcOccluded16` on
+//! runs of 16 consecutive rays (a 4×4 tile of camera rays), the API the kernel harness found
+//! best for some ray classes; `compare --render` times both and reports both.
 
 use std::cell::RefCell;
 use std::fmt::Write as _;
 use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 use glam::{Affine3A, Mat3, Vec3};
@@ -29,6 +33,8 @@ pub struct EmbreeBackend {
     /// Per instance: Embree 3 reports instance hits' normals in object space; strahl's in world
     /// space by the cofactor matrix `det(M)·M⁻ᵀ` (which flips with a mirroring transform's winding).
     cofactor: Vec<Mat3>,
+    /// Streams through `rtcIntersect16`/`rtcOccluded16` instead of the `1M` calls.
+    packets: AtomicBool,
     _device: Device,
 }
 
@@ -50,6 +56,36 @@ fn packet(rays: &RayPacket) -> (embree::RTCRayHit16, [i32; 16]) {
     (p, valid)
 }
 
+/// Embree's packet of rays `start..start + n` (`n ≤ 16`) of a stream, all lanes valid (bad rays
+/// become empty intervals, as in the `1M` records).
+fn stream_packet(rays: &RayStream, start: usize, n: usize) -> (embree::RTCRayHit16, [i32; 16]) {
+    let mut p = empty_packet();
+    let mut valid = [0i32; 16];
+    for l in 0..n {
+        set_lane(&mut p, l, &embree_ray_of(&rays.get(start + l), (start + l) as u32));
+        valid[l] = -1;
+    }
+    (p, valid)
+}
+
+/// Lane `l` of a traced packet as a single record (its `tfar` and hit).
+fn lane_record(p: &embree::RTCRayHit16, l: usize) -> RTCRayHit {
+    let h = &p.hit;
+    RTCRayHit {
+        ray: RTCRay { tfar: p.ray.tfar[l], ..embree_ray_of(&Ray::new(Vec3::ZERO, Vec3::X), l as u32) },
+        hit: embree::RTCHit {
+            Ng_x: h.Ng_x[l],
+            Ng_y: h.Ng_y[l],
+            Ng_z: h.Ng_z[l],
+            u: h.u[l],
+            v: h.v[l],
+            primID: h.primID[l],
+            geomID: h.geomID[l],
+            instID: [h.instID[0][l]],
+        },
+    }
+}
+
 fn cofactor(m: &Affine3A) -> Mat3 {
     let l = Mat3::from(m.matrix3);
     l.inverse().transpose() * l.determinant()
@@ -62,7 +98,13 @@ impl EmbreeBackend {
         let xfms: Vec<(usize, [f32; 12])> = instances.iter().map(|i| (i.object, column_major(&i.transform))).collect();
         let scene = embree::Scene::build_instanced(&device, objects, &xfms, embree::Quality::Medium)?;
         let cofactor = instances.iter().map(|i| cofactor(&i.transform)).collect();
-        Ok(Self { scene, cofactor, _device: device })
+        Ok(Self { scene, cofactor, packets: AtomicBool::new(false), _device: device })
+    }
+
+    /// Answers streams through `rtcIntersect16`/`rtcOccluded16` on runs of 16 consecutive rays
+    /// (`true`) or through `rtcIntersect1M`/`rtcOccluded1M` (`false`, the default).
+    pub fn set_packets(&self, on: bool) {
+        self.packets.store(on, Ordering::Relaxed);
     }
 
     fn hit(&self, rh: &RTCRayHit) -> Option<Hit> {
@@ -197,6 +239,23 @@ impl EmbreeBackend {
     /// Rays `start..start + out.t.len()` through `rtcIntersect1M`, in Embree's records built in a
     /// thread-local buffer; answers written into `out` (misses left as they are).
     fn intersect_chunk(&self, rays: &RayStream, start: usize, out: HitOut<'_>, coherent: bool) {
+        if self.packets.load(Ordering::Relaxed) {
+            let n = out.t.len();
+            for k in (0..n).step_by(16) {
+                let m = (n - k).min(16);
+                let (mut p, valid) = stream_packet(rays, start + k, m);
+                self.scene.intersect16(&valid, &mut p, coherent);
+                for l in 0..m {
+                    if let Some(hit) = self.hit(&lane_record(&p, l)) {
+                        let i = k + l;
+                        (out.t[i], out.u[i], out.v[i]) = (hit.t, hit.u, hit.v);
+                        (out.nx[i], out.ny[i], out.nz[i]) = (hit.ng.x, hit.ng.y, hit.ng.z);
+                        (out.prim[i], out.geom[i], out.inst[i]) = (hit.prim_id, hit.geom_id, hit.inst_id);
+                    }
+                }
+            }
+            return;
+        }
         HIT_BUF.with_borrow_mut(|buf| {
             buf.clear();
             let n = out.t.len();
@@ -216,6 +275,18 @@ impl EmbreeBackend {
 
     /// Rays `start..start + out.len()` through `rtcOccluded1M`.
     fn occluded_chunk(&self, rays: &RayStream, start: usize, out: &mut [bool], coherent: bool) {
+        if self.packets.load(Ordering::Relaxed) {
+            let n = out.len();
+            for k in (0..n).step_by(16) {
+                let m = (n - k).min(16);
+                let (mut p, valid) = stream_packet(rays, start + k, m);
+                self.scene.occluded16(&valid, &mut p.ray, coherent);
+                for l in 0..m {
+                    out[k + l] = p.ray.tfar[l] == f32::NEG_INFINITY;
+                }
+            }
+            return;
+        }
         RAY_BUF.with_borrow_mut(|buf| {
             buf.clear();
             buf.extend((start..start + out.len()).map(|k| embree_ray_of(&rays.get(k), k as u32)));
@@ -243,11 +314,16 @@ pub struct RenderRow {
     pub embree_s: f64,
     /// Quartiles of the per-pass ratios strahl time / Embree time (below 1: strahl faster).
     pub ratio_quartiles: [f64; 3],
+    /// The same with Embree answering the streams through `rtcIntersect16`/`rtcOccluded16`.
+    pub embree16_s: f64,
+    pub ratio16_quartiles: [f64; 3],
     /// Median share of the worker threads' time spent inside the queries, per backend.
     pub strahl_query_share: f64,
     pub embree_query_share: f64,
+    pub embree16_query_share: f64,
     /// Pixels whose 8-bit sRGB colours differ by more than 1 in some channel, strahl vs Embree.
     pub embree_pixels_differing: u64,
+    pub embree16_pixels_differing: u64,
     /// strahl's whole job (read, load, build, render, write PNG), seconds, median of the passes.
     pub strahl_job_s: f64,
     /// POV-Ray's whole process, seconds (median of its runs), and its image against strahl's.
@@ -317,21 +393,31 @@ pub fn compare_scene(
     let none = |_| {};
     let (mut img_s, mut stats) = pool.install(|| ours.render(&none))?;
     let (mut img_e, _) = pool.install(|| theirs.render(&none))?;
+    backend.set_packets(true);
+    let (mut img_e16, _) = pool.install(|| theirs.render(&none))?;
     let (mut ts, mut te, mut qs, mut qe, mut ratios) = (vec![], vec![], vec![], vec![], vec![]);
+    let (mut te16, mut qe16, mut ratios16) = (vec![], vec![], vec![]);
     for _ in 0..passes {
         let (i, s) = pool.install(|| ours.render(&none))?;
+        backend.set_packets(false);
         let (j, e) = pool.install(|| theirs.render(&none))?;
+        backend.set_packets(true);
+        let (j16, e16) = pool.install(|| theirs.render(&none))?;
         ts.push(s.seconds);
         te.push(e.seconds);
+        te16.push(e16.seconds);
         qs.push(s.query_share());
         qe.push(e.query_share());
+        qe16.push(e16.query_share());
         ratios.push(s.seconds / e.seconds);
-        (img_s, stats, img_e) = (i, s, j);
+        ratios16.push(s.seconds / e16.seconds);
+        (img_s, stats, img_e, img_e16) = (i, s, j, j16);
     }
     img_s.write(&out.join(format!("{name}_strahl.png")))?;
     img_e.write(&out.join(format!("{name}_embree.png")))?;
     let (s8, e8) = (img_s.to_srgb8(), img_e.to_srgb8());
     let (_, embree_pixels_differing) = diff8(&s8, &e8, 1);
+    let (_, embree16_pixels_differing) = diff8(&s8, &img_e16.to_srgb8(), 1);
     // The bailout's saving: the same frame with the cut-off at 0.
     let all = Renderer { settings: strahl::render::Settings { bailout: 0.0, ..settings }, ..ours };
     let (img_all, stats_all) = pool.install(|| all.render(&none))?;
@@ -379,9 +465,13 @@ pub fn compare_scene(
         strahl_s: median(&ts),
         embree_s: median(&te),
         ratio_quartiles: quartiles(&ratios),
+        embree16_s: median(&te16),
+        ratio16_quartiles: quartiles(&ratios16),
         strahl_query_share: median(&qs),
         embree_query_share: median(&qe),
+        embree16_query_share: median(&qe16),
         embree_pixels_differing,
+        embree16_pixels_differing,
         strahl_job_s: median(&jobs),
         povray_s,
         povray_psnr_db,
@@ -397,15 +487,15 @@ pub fn table(rows: &[RenderRow], threads: usize, passes: usize) -> String {
     let mut s = format!(
         "Frame times: median of {passes} interleaved passes, {threads} threads; ratio quartiles of the pass pairs. \
          POV-Ray: whole process (parse, render, write), median of up to 3 runs; strahl job: read, load, build, render, write.\n\n\
-         | scene | size | rays (prim / shadow / refl / refr) | strahl frame | strahl on Embree | ratio (q1 / med / q3) | share in queries (strahl / Embree) | Mrays/s strahl | pixels ≠ Embree | strahl job | POV-Ray | POV-Ray ÷ strahl job | PSNR vs POV-Ray | within 8/255 |\n\
-         |---|---|---|---:|---:|---|---|---:|---:|---:|---:|---:|---:|---:|\n"
+         | scene | size | rays (prim / shadow / refl / refr) | strahl frame | strahl on Embree 1M | ratio (q1 / med / q3) | strahl on Embree 16 | ratio (q1 / med / q3) | share in queries (strahl / Embree 1M / 16) | Mrays/s strahl | pixels ≠ Embree (1M / 16) | strahl job | POV-Ray | POV-Ray ÷ strahl job | PSNR vs POV-Ray | within 8/255 |\n\
+         |---|---|---|---:|---:|---|---:|---|---|---:|---:|---:|---:|---:|---:|---:|\n"
     );
     for r in rows {
         let total: u64 = r.rays.iter().sum();
         let pov = |x: Option<f64>, f: &dyn Fn(f64) -> String| x.map_or("—".into(), f);
         writeln!(
             s,
-            "| {} | {}×{}, {} spp, depth {} | {} / {} / {} / {} | {:.1} ms | {:.1} ms | {:.2} / {:.2} / {:.2} | {:.0}% / {:.0}% | {:.1} | {} | {:.0} ms | {} | {} | {} | {} |",
+            "| {} | {}×{}, {} spp, depth {} | {} / {} / {} / {} | {:.1} ms | {:.1} ms | {:.2} / {:.2} / {:.2} | {:.1} ms | {:.2} / {:.2} / {:.2} | {:.0}% / {:.0}% / {:.0}% | {:.1} | {} / {} | {:.0} ms | {} | {} | {} | {} |",
             r.scene,
             r.width,
             r.height,
@@ -420,10 +510,16 @@ pub fn table(rows: &[RenderRow], threads: usize, passes: usize) -> String {
             r.ratio_quartiles[0],
             r.ratio_quartiles[1],
             r.ratio_quartiles[2],
+            r.embree16_s * 1e3,
+            r.ratio16_quartiles[0],
+            r.ratio16_quartiles[1],
+            r.ratio16_quartiles[2],
             100.0 * r.strahl_query_share,
             100.0 * r.embree_query_share,
+            100.0 * r.embree16_query_share,
             total as f64 / r.strahl_s / 1e6,
             r.embree_pixels_differing,
+            r.embree16_pixels_differing,
             r.strahl_job_s * 1e3,
             pov(r.povray_s, &|x| format!("{:.0} ms", x * 1e3)),
             pov(r.povray_s, &|x| format!("{:.1}×", x / r.strahl_job_s)),

@@ -27,15 +27,23 @@ fn embree_backend_renders_the_same_image() {
         let camera = file.camera.unwrap().render_camera().unwrap();
         let settings = small(&file);
         let (a, sa) = Renderer { query: &ours, world: &world, camera, settings }.render(&|_| {}).unwrap();
-        let (b, sb) = Renderer { query: &theirs, world: &world, camera, settings }.render(&|_| {}).unwrap();
-        // Hits may differ only where two triangles tie in float64 (shared edges): a handful of
-        // pixels at most, and the same ray counts within as much.
-        let (a8, b8) = (a.to_srgb8(), b.to_srgb8());
-        let differing =
-            a8.chunks(3).zip(b8.chunks(3)).filter(|(p, q)| p.iter().zip(*q).any(|(x, y)| x.abs_diff(*y) > 1)).count();
-        assert!(differing * 1000 <= a.pixels.len(), "{name}: {differing} of {} pixels differ", a.pixels.len());
-        let (ta, tb) = (sa.total_rays() as f64, sb.total_rays() as f64);
-        assert!((ta - tb).abs() <= 1e-3 * ta, "{name}: {ta} vs {tb} rays");
+        // Embree through its stream calls (`1M`), then through 16-ray packets.
+        for packets in [false, true] {
+            theirs.set_packets(packets);
+            let (b, sb) = Renderer { query: &theirs, world: &world, camera, settings }.render(&|_| {}).unwrap();
+            // Hits may differ only where two triangles tie in float64 (shared edges): a handful
+            // of pixels at most, and the same ray counts within as much.
+            let (a8, b8) = (a.to_srgb8(), b.to_srgb8());
+            let differing = a8
+                .chunks(3)
+                .zip(b8.chunks(3))
+                .filter(|(p, q)| p.iter().zip(*q).any(|(x, y)| x.abs_diff(*y) > 1))
+                .count();
+            let what = format!("{name} (Embree packets: {packets})");
+            assert!(differing * 1000 <= a.pixels.len(), "{what}: {differing} of {} pixels differ", a.pixels.len());
+            let (ta, tb) = (sa.total_rays() as f64, sb.total_rays() as f64);
+            assert!((ta - tb).abs() <= 1e-3 * ta, "{what}: {ta} vs {tb} rays");
+        }
     }
 }
 
