@@ -52,7 +52,9 @@ pub use error::{Error, Result};
 pub use geometry::{MAX_COORDINATE, TriangleMesh, TriangleTest, exact_hit, intersect_triangle, load_obj, parse_obj};
 pub use instance::{Instance, InstancedScene, InstancedStats};
 pub use query::{ClosestPoint, SpatialQuery};
-pub use ray::{Hit, HitPacket, HitStream, INVALID_ID, PACKET_WIDTH, Ray, RayPacket, RayStream, offset_ray_origin};
+pub use ray::{
+    Hit, HitPacket, HitSlice, HitStream, INVALID_ID, PACKET_WIDTH, Ray, RayPacket, RayStream, offset_ray_origin,
+};
 pub use render::Light;
 pub use scene::{Coherence, Query, STREAM_CHUNK, Scene};
 pub use scene_file::SceneFile;

@@ -8,6 +8,7 @@
 //! stays the same when a ray is transformed into another space (the seeds' instancing slides).
 
 use glam::Vec3;
+use rayon::prelude::*;
 
 pub use crate::simd::PACKET_WIDTH;
 
@@ -570,9 +571,143 @@ impl HitStream {
     }
 }
 
+/// A run of a [`HitStream`]'s entries, borrowed mutably: what [`HitStream::par_chunks_mut`]
+/// hands each worker, so that a backend writes its answers in place.
+pub struct HitSlice<'a> {
+    t: &'a mut [f32],
+    u: &'a mut [f32],
+    v: &'a mut [f32],
+    ng_x: &'a mut [f32],
+    ng_y: &'a mut [f32],
+    ng_z: &'a mut [f32],
+    prim_id: &'a mut [u32],
+    geom_id: &'a mut [u32],
+    inst_id: &'a mut [u32],
+}
+
+impl<'a> HitSlice<'a> {
+    pub(crate) fn of(h: &'a mut HitStream) -> Self {
+        Self {
+            t: &mut h.t,
+            u: &mut h.u,
+            v: &mut h.v,
+            ng_x: &mut h.ng_x,
+            ng_y: &mut h.ng_y,
+            ng_z: &mut h.ng_z,
+            prim_id: &mut h.prim_id,
+            geom_id: &mut h.geom_id,
+            inst_id: &mut h.inst_id,
+        }
+    }
+
+    /// The number of entries.
+    pub fn len(&self) -> usize {
+        self.t.len()
+    }
+
+    /// Whether there are none.
+    pub fn is_empty(&self) -> bool {
+        self.t.is_empty()
+    }
+
+    /// Marks every entry from `from` on a miss: `t = +inf` and invalid ids, as [`HitPacket`] defines a miss
+    /// (the other fields of a miss are unspecified; writing them too cost Cornell's and the
+    /// teapot's primary streams a tenth of their time).
+    pub(crate) fn clear(&mut self, from: usize) {
+        self.t[from..].fill(f32::INFINITY);
+        for ids in [&mut *self.prim_id, &mut *self.geom_id, &mut *self.inst_id] {
+            ids[from..].fill(INVALID_ID);
+        }
+    }
+
+    /// Writes the whole packet `h` to entries `i..i + PACKET_WIDTH`.
+    #[inline(always)]
+    pub(crate) fn set_packet(&mut self, i: usize, h: &HitPacket) {
+        let r = i..i + PACKET_WIDTH;
+        self.t[r.clone()].copy_from_slice(&h.t);
+        self.u[r.clone()].copy_from_slice(&h.u);
+        self.v[r.clone()].copy_from_slice(&h.v);
+        self.ng_x[r.clone()].copy_from_slice(&h.ng_x);
+        self.ng_y[r.clone()].copy_from_slice(&h.ng_y);
+        self.ng_z[r.clone()].copy_from_slice(&h.ng_z);
+        self.prim_id[r.clone()].copy_from_slice(&h.prim_id);
+        self.geom_id[r.clone()].copy_from_slice(&h.geom_id);
+        self.inst_id[r].copy_from_slice(&h.inst_id);
+    }
+
+    /// Writes hit `h` to entry `i` (panics if `i` is out of range, like slice indexing).
+    #[inline]
+    pub fn set(&mut self, i: usize, h: &Hit) {
+        debug_assert!(h.prim_id != INVALID_ID);
+        self.t[i] = h.t;
+        self.u[i] = h.u;
+        self.v[i] = h.v;
+        self.ng_x[i] = h.ng.x;
+        self.ng_y[i] = h.ng.y;
+        self.ng_z[i] = h.ng.z;
+        self.prim_id[i] = h.prim_id;
+        self.geom_id[i] = h.geom_id;
+        self.inst_id[i] = h.inst_id;
+    }
+}
+
+impl HitStream {
+    /// The whole stream as one [`HitSlice`].
+    pub fn as_slice_mut(&mut self) -> HitSlice<'_> {
+        HitSlice::of(self)
+    }
+
+    /// The stream in runs of `chunk` entries (the last may be shorter; a `chunk` of 0 counts as
+    /// 1), for rayon: `hits.par_chunks_mut(n).enumerate()` gives each run with its index.
+    pub fn par_chunks_mut(&mut self, chunk: usize) -> impl IndexedParallelIterator<Item = HitSlice<'_>> {
+        let c = chunk.max(1);
+        let h = self;
+        (
+            (h.t.par_chunks_mut(c), h.u.par_chunks_mut(c), h.v.par_chunks_mut(c)),
+            (h.ng_x.par_chunks_mut(c), h.ng_y.par_chunks_mut(c), h.ng_z.par_chunks_mut(c)),
+            (h.prim_id.par_chunks_mut(c), h.geom_id.par_chunks_mut(c), h.inst_id.par_chunks_mut(c)),
+        )
+            .into_par_iter()
+            .map(|((t, u, v), (ng_x, ng_y, ng_z), (prim_id, geom_id, inst_id))| HitSlice {
+                t,
+                u,
+                v,
+                ng_x,
+                ng_y,
+                ng_z,
+                prim_id,
+                geom_id,
+                inst_id,
+            })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn hit_stream_chunks_cover_the_stream_and_write_in_place() {
+        use rayon::prelude::*;
+        let mut hits = HitStream::misses(37);
+        for chunk in [0usize, 1, 5, 16, 37, 100] {
+            let lens: Vec<usize> = hits.par_chunks_mut(chunk).map(|c| c.len()).collect();
+            assert_eq!(lens.iter().sum::<usize>(), 37, "chunk {chunk}");
+            assert!(lens.iter().all(|&n| n >= 1 && n <= chunk.max(1)), "chunk {chunk}: {lens:?}");
+        }
+        hits.par_chunks_mut(5).enumerate().for_each(|(i, mut c)| {
+            let h =
+                Hit { t: i as f32, u: 0.0, v: 0.0, ng: Vec3::Z, prim_id: i as u32, geom_id: 0, inst_id: INVALID_ID };
+            c.set(0, &h);
+        });
+        for i in 0..37 {
+            match hits.get(i) {
+                Some(h) => assert_eq!((i % 5, h.prim_id as usize), (0, i / 5)),
+                None => assert_ne!(i % 5, 0),
+            }
+        }
+        assert!(hits.as_slice_mut().len() == 37 && !hits.as_slice_mut().is_empty());
+    }
 
     #[test]
     fn validity() {

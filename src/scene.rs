@@ -14,7 +14,7 @@ use crate::bvh::{BoxTest, BuildConfig, BuildStats, Bvh};
 use crate::error::Result;
 use crate::geometry::TriangleTest;
 use crate::geometry::{TriangleMesh, load_obj};
-use crate::ray::{Hit, HitPacket, HitStream, INVALID_ID, PACKET_WIDTH, Ray, RayPacket, RayStream};
+use crate::ray::{Hit, HitPacket, HitSlice, HitStream, PACKET_WIDTH, Ray, RayPacket, RayStream};
 
 /// How a stream query groups its rays.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -249,7 +249,7 @@ pub trait Query: Sync {
     /// Closest hits of every ray of a stream; `hits` is resized to the stream's length.
     fn intersect_stream(&self, rays: &RayStream, hits: &mut HitStream, coherence: Coherence) {
         hits.resize_uncleared(rays.len());
-        intersect_range(self, rays, 0, HitSlice::of(hits), coherence);
+        intersect_range(self, rays, 0, hits.as_slice_mut(), coherence);
     }
 
     /// Occlusion of every ray of a stream; `occluded` is resized to the stream's length.
@@ -263,20 +263,10 @@ pub trait Query: Sync {
     /// of [`STREAM_CHUNK`] rays.
     fn intersect_stream_par(&self, rays: &RayStream, hits: &mut HitStream, coherence: Coherence) {
         hits.resize_uncleared(rays.len());
-        let c = STREAM_CHUNK;
-        let h = hits;
-        (
-            (h.t.par_chunks_mut(c), h.u.par_chunks_mut(c), h.v.par_chunks_mut(c)),
-            (h.ng_x.par_chunks_mut(c), h.ng_y.par_chunks_mut(c), h.ng_z.par_chunks_mut(c)),
-            (h.prim_id.par_chunks_mut(c), h.geom_id.par_chunks_mut(c), h.inst_id.par_chunks_mut(c)),
-        )
-            .into_par_iter()
+        hits.par_chunks_mut(STREAM_CHUNK)
             .enumerate()
             .with_max_len(1)
-            .for_each(|(i, ((t, u, v), (ng_x, ng_y, ng_z), (prim_id, geom_id, inst_id)))| {
-                let out = HitSlice { t, u, v, ng_x, ng_y, ng_z, prim_id, geom_id, inst_id };
-                intersect_range(self, rays, i * c, out, coherence);
-            });
+            .for_each(|(i, out)| intersect_range(self, rays, i * STREAM_CHUNK, out, coherence));
     }
 
     /// [`occluded_stream`](Self::occluded_stream) spread over the current rayon pool.
@@ -448,78 +438,6 @@ fn occluded_in_octant_groups<Q: Query + ?Sized>(q: &Q, rays: &RayStream, start: 
             k = e;
         }
     });
-}
-
-/// Mutable views of one range of a [`HitStream`].
-struct HitSlice<'a> {
-    t: &'a mut [f32],
-    u: &'a mut [f32],
-    v: &'a mut [f32],
-    ng_x: &'a mut [f32],
-    ng_y: &'a mut [f32],
-    ng_z: &'a mut [f32],
-    prim_id: &'a mut [u32],
-    geom_id: &'a mut [u32],
-    inst_id: &'a mut [u32],
-}
-
-impl<'a> HitSlice<'a> {
-    fn of(h: &'a mut HitStream) -> Self {
-        Self {
-            t: &mut h.t,
-            u: &mut h.u,
-            v: &mut h.v,
-            ng_x: &mut h.ng_x,
-            ng_y: &mut h.ng_y,
-            ng_z: &mut h.ng_z,
-            prim_id: &mut h.prim_id,
-            geom_id: &mut h.geom_id,
-            inst_id: &mut h.inst_id,
-        }
-    }
-
-    fn len(&self) -> usize {
-        self.t.len()
-    }
-
-    /// Marks every entry from `from` on a miss: `t = +inf` and invalid ids, as [`HitPacket`] defines a miss
-    /// (the other fields of a miss are unspecified; writing them too cost Cornell's and the
-    /// teapot's primary streams a tenth of their time).
-    fn clear(&mut self, from: usize) {
-        self.t[from..].fill(f32::INFINITY);
-        for ids in [&mut *self.prim_id, &mut *self.geom_id, &mut *self.inst_id] {
-            ids[from..].fill(INVALID_ID);
-        }
-    }
-
-    /// Writes the whole packet `h` to entries `i..i + PACKET_WIDTH`.
-    #[inline(always)]
-    fn set_packet(&mut self, i: usize, h: &HitPacket) {
-        let r = i..i + PACKET_WIDTH;
-        self.t[r.clone()].copy_from_slice(&h.t);
-        self.u[r.clone()].copy_from_slice(&h.u);
-        self.v[r.clone()].copy_from_slice(&h.v);
-        self.ng_x[r.clone()].copy_from_slice(&h.ng_x);
-        self.ng_y[r.clone()].copy_from_slice(&h.ng_y);
-        self.ng_z[r.clone()].copy_from_slice(&h.ng_z);
-        self.prim_id[r.clone()].copy_from_slice(&h.prim_id);
-        self.geom_id[r.clone()].copy_from_slice(&h.geom_id);
-        self.inst_id[r].copy_from_slice(&h.inst_id);
-    }
-
-    #[inline]
-    fn set(&mut self, i: usize, h: &Hit) {
-        debug_assert!(h.prim_id != INVALID_ID);
-        self.t[i] = h.t;
-        self.u[i] = h.u;
-        self.v[i] = h.v;
-        self.ng_x[i] = h.ng.x;
-        self.ng_y[i] = h.ng.y;
-        self.ng_z[i] = h.ng.z;
-        self.prim_id[i] = h.prim_id;
-        self.geom_id[i] = h.geom_id;
-        self.inst_id[i] = h.inst_id;
-    }
 }
 
 #[cfg(test)]

@@ -20,7 +20,8 @@ use std::time::Instant;
 use glam::{Affine3A, Mat3, Vec3};
 use rayon::prelude::*;
 use strahl::{
-    Coherence, Hit, HitStream, INVALID_ID, Instance, Query, Ray, RayPacket, RayStream, STREAM_CHUNK, TriangleMesh,
+    Coherence, Hit, HitSlice, HitStream, INVALID_ID, Instance, Query, Ray, RayPacket, RayStream, STREAM_CHUNK,
+    TriangleMesh,
 };
 
 use crate::embree::{self, Device, RTC_INVALID_GEOMETRY_ID, RTCRay, RTCRayHit};
@@ -167,21 +168,8 @@ impl Query for EmbreeBackend {
     }
 
     fn intersect_stream(&self, rays: &RayStream, hits: &mut HitStream, coherence: Coherence) {
-        let n = rays.len();
-        hits.reset(n);
-        let h = hits;
-        let out = HitOut {
-            t: &mut h.t,
-            u: &mut h.u,
-            v: &mut h.v,
-            nx: &mut h.ng_x,
-            ny: &mut h.ng_y,
-            nz: &mut h.ng_z,
-            prim: &mut h.prim_id,
-            geom: &mut h.geom_id,
-            inst: &mut h.inst_id,
-        };
-        self.intersect_chunk(rays, 0, out, coherence == Coherence::Coherent);
+        hits.reset(rays.len());
+        self.intersect_chunk(rays, 0, hits.as_slice_mut(), coherence == Coherence::Coherent);
     }
 
     fn occluded_stream(&self, rays: &RayStream, occluded: &mut Vec<bool>, coherence: Coherence) {
@@ -191,23 +179,12 @@ impl Query for EmbreeBackend {
     }
 
     fn intersect_stream_par(&self, rays: &RayStream, hits: &mut HitStream, coherence: Coherence) {
-        let n = rays.len();
-        hits.reset(n);
+        hits.reset(rays.len());
         let coherent = coherence == Coherence::Coherent;
-        let c = STREAM_CHUNK;
-        let h = hits;
-        (
-            (h.t.par_chunks_mut(c), h.u.par_chunks_mut(c), h.v.par_chunks_mut(c)),
-            (h.ng_x.par_chunks_mut(c), h.ng_y.par_chunks_mut(c), h.ng_z.par_chunks_mut(c)),
-            (h.prim_id.par_chunks_mut(c), h.geom_id.par_chunks_mut(c), h.inst_id.par_chunks_mut(c)),
-        )
-            .into_par_iter()
+        hits.par_chunks_mut(STREAM_CHUNK)
             .enumerate()
             .with_max_len(1)
-            .for_each(|(i, ((t, u, v), (nx, ny, nz), (prim, geom, inst)))| {
-                let out = HitOut { t, u, v, nx, ny, nz, prim, geom, inst };
-                self.intersect_chunk(rays, i * c, out, coherent);
-            });
+            .for_each(|(i, out)| self.intersect_chunk(rays, i * STREAM_CHUNK, out, coherent));
     }
 
     fn occluded_stream_par(&self, rays: &RayStream, occluded: &mut Vec<bool>, coherence: Coherence) {
@@ -222,35 +199,19 @@ impl Query for EmbreeBackend {
     }
 }
 
-/// Where a run of hits goes: slices of a [`HitStream`]'s arrays, all of one length.
-struct HitOut<'a> {
-    t: &'a mut [f32],
-    u: &'a mut [f32],
-    v: &'a mut [f32],
-    nx: &'a mut [f32],
-    ny: &'a mut [f32],
-    nz: &'a mut [f32],
-    prim: &'a mut [u32],
-    geom: &'a mut [u32],
-    inst: &'a mut [u32],
-}
-
 impl EmbreeBackend {
-    /// Rays `start..start + out.t.len()` through `rtcIntersect1M`, in Embree's records built in a
+    /// Rays `start..start + out.len()` through `rtcIntersect1M`, in Embree's records built in a
     /// thread-local buffer; answers written into `out` (misses left as they are).
-    fn intersect_chunk(&self, rays: &RayStream, start: usize, out: HitOut<'_>, coherent: bool) {
+    fn intersect_chunk(&self, rays: &RayStream, start: usize, mut out: HitSlice<'_>, coherent: bool) {
         if self.packets.load(Ordering::Relaxed) {
-            let n = out.t.len();
+            let n = out.len();
             for k in (0..n).step_by(16) {
                 let m = (n - k).min(16);
                 let (mut p, valid) = stream_packet(rays, start + k, m);
                 self.scene.intersect16(&valid, &mut p, coherent);
                 for l in 0..m {
                     if let Some(hit) = self.hit(&lane_record(&p, l)) {
-                        let i = k + l;
-                        (out.t[i], out.u[i], out.v[i]) = (hit.t, hit.u, hit.v);
-                        (out.nx[i], out.ny[i], out.nz[i]) = (hit.ng.x, hit.ng.y, hit.ng.z);
-                        (out.prim[i], out.geom[i], out.inst[i]) = (hit.prim_id, hit.geom_id, hit.inst_id);
+                        out.set(k + l, &hit);
                     }
                 }
             }
@@ -258,16 +219,14 @@ impl EmbreeBackend {
         }
         HIT_BUF.with_borrow_mut(|buf| {
             buf.clear();
-            let n = out.t.len();
+            let n = out.len();
             buf.extend(
                 (start..start + n).map(|k| RTCRayHit { ray: embree_ray_of(&rays.get(k), k as u32), hit: empty_hit() }),
             );
             self.scene.intersect1m(buf, coherent);
             for (k, rh) in buf.iter().enumerate() {
                 if let Some(hit) = self.hit(rh) {
-                    (out.t[k], out.u[k], out.v[k]) = (hit.t, hit.u, hit.v);
-                    (out.nx[k], out.ny[k], out.nz[k]) = (hit.ng.x, hit.ng.y, hit.ng.z);
-                    (out.prim[k], out.geom[k], out.inst[k]) = (hit.prim_id, hit.geom_id, hit.inst_id);
+                    out.set(k, &hit);
                 }
             }
         });
