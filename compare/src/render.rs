@@ -141,20 +141,7 @@ impl Query for EmbreeBackend {
         let (mut p, valid) = packet(rays);
         self.scene.intersect16(&valid, &mut p, false);
         for l in (0..16).filter(|&l| valid[l] != 0) {
-            let h = &p.hit;
-            let rh = RTCRayHit {
-                ray: RTCRay { tfar: p.ray.tfar[l], ..embree_ray_of(&rays.get(l), l as u32) },
-                hit: embree::RTCHit {
-                    Ng_x: h.Ng_x[l],
-                    Ng_y: h.Ng_y[l],
-                    Ng_z: h.Ng_z[l],
-                    u: h.u[l],
-                    v: h.v[l],
-                    primID: h.primID[l],
-                    geomID: h.geomID[l],
-                    instID: [h.instID[0][l]],
-                },
-            };
+            let rh = lane_record(&p, l);
             if let Some(hit) = self.hit(&rh) {
                 f(l, &hit);
             }
