@@ -638,7 +638,6 @@ impl<'a> HitSlice<'a> {
     /// Writes hit `h` to entry `i` (panics if `i` is out of range, like slice indexing).
     #[inline]
     pub fn set(&mut self, i: usize, h: &Hit) {
-        debug_assert!(h.prim_id != INVALID_ID);
         self.t[i] = h.t;
         self.u[i] = h.u;
         self.v[i] = h.v;
