@@ -550,17 +550,7 @@ impl HitStream {
     /// Writes entry `i` (a miss for `None`).
     pub fn set(&mut self, i: usize, hit: Option<Hit>) {
         match hit {
-            Some(h) => {
-                self.t[i] = h.t;
-                self.u[i] = h.u;
-                self.v[i] = h.v;
-                self.ng_x[i] = h.ng.x;
-                self.ng_y[i] = h.ng.y;
-                self.ng_z[i] = h.ng.z;
-                self.prim_id[i] = h.prim_id;
-                self.geom_id[i] = h.geom_id;
-                self.inst_id[i] = h.inst_id;
-            }
+            Some(h) => self.as_slice_mut().set(i, &h),
             None => {
                 self.t[i] = f32::INFINITY;
                 self.prim_id[i] = INVALID_ID;
