@@ -121,6 +121,23 @@ pub enum Error {
     /// A scene has more geometries than geometry ids can name.
     #[error("scene has {0} geometries; at most 2^32 - 1 are supported (2^29 with the Badouel test)")]
     TooManyGeometries(usize),
+    /// A sphere with a non-finite or out-of-range centre, or a radius that is not a positive
+    /// finite number, or a sphere set whose centre and radius lists differ in length.
+    #[error("sphere set {set:?}, sphere {index}: {message}")]
+    BadSphere {
+        /// The set's name.
+        set: String,
+        /// The sphere's index in the set.
+        index: usize,
+        /// What is wrong, with the value.
+        message: String,
+    },
+    /// An instanced scene's object holds analytic shapes, which only flat scenes trace so far.
+    #[error("object {object} of an instanced scene holds analytic shapes; only flat scenes trace them so far")]
+    ShapesNotInstanced {
+        /// The object's index.
+        object: usize,
+    },
     /// Bytes given to `Scene::from_bytes` or `InstancedScene::from_bytes` are not a scene this
     /// version wrote, or were damaged.
     #[error("serialized scene: {0}")]

@@ -162,6 +162,9 @@ impl InstancedScene {
         if objects.iter().any(|o| o.tests() != (test, box_test)) {
             return Err(Error::MixedTests);
         }
+        if let Some(object) = objects.iter().position(|o| !o.spheres().is_empty()) {
+            return Err(Error::ShapesNotInstanced { object });
+        }
         if instances.len() > MAX_BLOCK_INDEX {
             return Err(Error::TooManyInstances(instances.len()));
         }

@@ -42,6 +42,7 @@ pub mod raygen;
 pub mod render;
 pub mod scene;
 pub mod scene_file;
+pub mod shapes;
 pub mod simd;
 mod sys;
 
@@ -58,6 +59,7 @@ pub use ray::{
 pub use render::Light;
 pub use scene::{Coherence, Query, STREAM_CHUNK, Scene};
 pub use scene_file::SceneFile;
+pub use shapes::{SphereSet, SphereTest};
 
 /// The README's code examples run as doctests.
 #[cfg(doctest)]

@@ -21,11 +21,13 @@ use crate::geometry::TriangleTest;
 use crate::geometry::triangle::{BLOCK, TriBlock};
 use crate::instance::{Instance, InstancedScene};
 use crate::scene::Scene;
+use crate::shapes::{SphereSet, SphereTest};
 
 /// The first bytes of a serialized scene.
 const MAGIC: &[u8; 8] = b"STRAHLSC";
-/// Format version; bumped whenever the layout of nodes, blocks or this format changes.
-const VERSION: u32 = 1;
+/// Format version; bumped whenever the layout of nodes, blocks or this format changes. Version 2
+/// appends the sphere sets (their tree is rebuilt on reading); version 1 bytes still read.
+const VERSION: u32 = 2;
 /// Deepest wide level a built tree reaches (`MEDIAN_DEPTH` SAH levels, then at most 32 median
 /// levels), which the traversal stack is sized for.
 const MAX_DEPTH: usize = MEDIAN_DEPTH + 33;
@@ -84,6 +86,17 @@ impl Scene {
         w.u64(s.bytes as u64);
         w.f64(s.bytes_per_triangle);
         w.u64(s.depth as u64);
+        // Version 2: the sphere sets and their test; the sphere tree is rebuilt on reading.
+        w.u8(SphereTest::ALL.iter().position(|&t| t == self.sphere_test()).unwrap_or(0) as u8);
+        w.u64(self.spheres().len() as u64);
+        for set in self.spheres() {
+            w.u64(set.name().len() as u64);
+            w.0.extend_from_slice(set.name().as_bytes());
+            w.u64(set.len() as u64);
+            for (c, &rad) in set.centers().iter().zip(set.radii()) {
+                [c.x, c.y, c.z, rad].iter().for_each(|&x| w.f32(x));
+            }
+        }
         w.0
     }
 
@@ -96,7 +109,7 @@ impl Scene {
             return Err(bad("not a serialized strahl scene (no STRAHLSC header)"));
         }
         let version = r.u32()?;
-        if version != VERSION {
+        if version != VERSION && version != 1 {
             return Err(bad(format!("format version {version}; this strahl reads version {VERSION}")));
         }
         let test = match r.u8()? {
@@ -175,7 +188,25 @@ impl Scene {
             bytes: r.u64()? as usize,
             bytes_per_triangle: r.f64()?,
             depth: r.u64()? as usize,
+            shapes: 0,
         };
+        let mut sphere_test = SphereTest::default();
+        let mut spheres = Vec::new();
+        if version >= 2 {
+            let code = r.u8()? as usize;
+            sphere_test = *SphereTest::ALL.get(code).ok_or_else(|| bad(format!("unknown sphere test {code}")))?;
+            let sets = r.count(16)?;
+            for _ in 0..sets {
+                let len = r.count(1)?;
+                let name =
+                    String::from_utf8(r.take(len)?.to_vec()).map_err(|_| bad("a sphere set's name is not UTF-8"))?;
+                let n = r.count(16)?;
+                let pairs = (0..n)
+                    .map(|_| Ok((Vec3::new(r.f32()?, r.f32()?, r.f32()?), r.f32()?)))
+                    .collect::<Result<Vec<_>>>()?;
+                spheres.push(SphereSet::from_pairs(name, &pairs)?);
+            }
+        }
         if !r.b.is_empty() {
             return Err(bad(format!("{} bytes after the scene", r.b.len())));
         }
@@ -188,7 +219,7 @@ impl Scene {
         check_tree(&nodes, blocks.len(), root)?;
         check_blocks(&blocks, test, &meshes)?;
         let bvh = Bvh { nodes, blocks, root, bounds, test, box_test, stats, prefetch };
-        Ok(Scene::from_parts(meshes, bvh))
+        Scene::from_parts(meshes, bvh, spheres, sphere_test)
     }
 }
 

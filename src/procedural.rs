@@ -56,18 +56,18 @@ pub fn uv_sphere(center: Vec3, radius: f32, stacks: u32, slices: u32) -> Triangl
 /// tessellated with `stacks × slices`. `levels = 3`, 12 × 24 gives 820 spheres, 433k triangles.
 pub fn sphereflake(levels: u32, stacks: u32, slices: u32) -> TriangleMesh {
     let (mut p, mut idx) = (Vec::new(), Vec::new());
-    #[allow(clippy::too_many_arguments)]
-    fn grow(
-        p: &mut Vec<Vec3>,
-        idx: &mut Vec<[u32; 3]>,
-        c: Vec3,
-        r: f32,
-        axis: Vec3,
-        level: u32,
-        stacks: u32,
-        slices: u32,
-    ) {
-        append_uv_sphere(p, idx, c, r, stacks, slices);
+    for (c, r) in sphereflake_spheres(levels) {
+        append_uv_sphere(&mut p, &mut idx, c, r, stacks, slices);
+    }
+    TriangleMesh::new("sphereflake", p, idx).expect("indices are generated in range")
+}
+
+/// The spheres of [`sphereflake`] as `(centre, radius)`, in the order it tessellates them:
+/// `(9^(levels+1) − 1) / 8` of them (820 at level 3, 597,871 at level 6). Its analytic twin
+/// ([`SphereSet`](crate::SphereSet)) models the same surface exactly, with four floats a sphere.
+pub fn sphereflake_spheres(levels: u32) -> Vec<(Vec3, f32)> {
+    fn grow(out: &mut Vec<(Vec3, f32)>, c: Vec3, r: f32, axis: Vec3, level: u32) {
+        out.push((c, r));
         if level == 0 {
             return;
         }
@@ -75,7 +75,7 @@ pub fn sphereflake(levels: u32, stacks: u32, slices: u32) -> TriangleMesh {
         let child_r = r / 3.0;
         let mut place = |elevation: f32, azimuth: f32| {
             let d = (axis * elevation.sin() + (t * azimuth.cos() + b * azimuth.sin()) * elevation.cos()).normalize();
-            grow(p, idx, c + d * (r + child_r), child_r, d, level - 1, stacks, slices);
+            grow(out, c + d * (r + child_r), child_r, d, level - 1);
         };
         let deg = std::f32::consts::PI / 180.0;
         for k in 0..6 {
@@ -85,8 +85,9 @@ pub fn sphereflake(levels: u32, stacks: u32, slices: u32) -> TriangleMesh {
             place(60.0 * deg, (30 + 120 * k) as f32 * deg);
         }
     }
-    grow(&mut p, &mut idx, Vec3::ZERO, 1.0, Vec3::Y, levels, stacks, slices);
-    TriangleMesh::new("sphereflake", p, idx).expect("indices are generated in range")
+    let mut out = Vec::new();
+    grow(&mut out, Vec3::ZERO, 1.0, Vec3::Y, levels);
+    out
 }
 
 /// An axis-aligned box from `min` to `max`: 12 triangles wound counter-clockwise seen from

@@ -15,6 +15,8 @@ use crate::error::Result;
 use crate::geometry::TriangleTest;
 use crate::geometry::{TriangleMesh, load_obj};
 use crate::ray::{Hit, HitPacket, HitSlice, HitStream, PACKET_WIDTH, Ray, RayPacket, RayStream};
+use crate::shapes::tree::SphereBvh;
+use crate::shapes::{SphereSet, SphereTest};
 
 /// How a stream query groups its rays.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -43,24 +45,67 @@ pub enum Coherence {
 /// and 14.25 with a job per chunk (Embree's `rtcIntersect1` in the same loop: 14.3 → 17.5).
 pub const STREAM_CHUNK: usize = 4096;
 
-/// Meshes and the BVH over them.
+/// Meshes and spheres, and a BVH over each kind (see [`crate::shapes`]).
 #[derive(Clone, Debug)]
 pub struct Scene {
     meshes: Vec<TriangleMesh>,
     bvh: Bvh,
+    spheres: Vec<SphereSet>,
+    shapes: SphereBvh,
 }
 
 impl Scene {
-    /// A scene from its parts, checked by the caller (`persist`).
-    pub(crate) fn from_parts(meshes: Vec<TriangleMesh>, bvh: Bvh) -> Self {
-        Self { meshes, bvh }
+    /// A scene from its parts, the meshes' tree checked by the caller (`persist`); the sphere
+    /// tree is built here.
+    pub(crate) fn from_parts(
+        meshes: Vec<TriangleMesh>,
+        bvh: Bvh,
+        spheres: Vec<SphereSet>,
+        sphere_test: SphereTest,
+    ) -> Result<Self> {
+        let cfg = BuildConfig { box_test: bvh.box_test, sphere_test, ..BuildConfig::default() };
+        let shapes = SphereBvh::build(&spheres, meshes.len(), &cfg)?;
+        Ok(Self { meshes, bvh, spheres, shapes })
+    }
+
+    /// The sphere test the scene's spheres are intersected with.
+    pub fn sphere_test(&self) -> SphereTest {
+        self.shapes.test
     }
 
     /// Builds the BVH over `meshes` on the current rayon pool. Geometry ids are indices into
     /// `meshes`. An empty list gives an empty scene that every ray misses.
     pub fn build(meshes: Vec<TriangleMesh>, config: &BuildConfig) -> Result<Self> {
+        Self::build_with_spheres(meshes, Vec::new(), config)
+    }
+
+    /// Builds a scene of meshes and analytic spheres: one BVH over the triangles, one over the
+    /// spheres (tested with `config.sphere_test`). Geometry ids: meshes first, in order, then
+    /// the sphere sets (set `s` is geometry `meshes.len() + s`).
+    pub fn build_with_spheres(
+        meshes: Vec<TriangleMesh>,
+        spheres: Vec<SphereSet>,
+        config: &BuildConfig,
+    ) -> Result<Self> {
         let bvh = Bvh::build(&meshes, config)?;
-        Ok(Self { meshes, bvh })
+        let shapes = SphereBvh::build(&spheres, meshes.len(), config)?;
+        Ok(Self { meshes, bvh, spheres, shapes })
+    }
+
+    /// The sphere sets (geometry ids from `meshes().len()` on).
+    pub fn spheres(&self) -> &[SphereSet] {
+        &self.spheres
+    }
+
+    /// The sphere tree's build statistics (`shapes` spheres; all zero without spheres).
+    pub fn sphere_stats(&self) -> &BuildStats {
+        &self.shapes.stats
+    }
+
+    /// Whether the scene holds spheres.
+    #[inline(always)]
+    fn has_shapes(&self) -> bool {
+        !self.shapes.is_empty()
     }
 
     /// Loads an OBJ file (one geometry per object/group) and builds it.
@@ -83,9 +128,12 @@ impl Scene {
         &self.bvh.stats
     }
 
-    /// Bounds of the hittable triangles, or `None` for an empty scene.
+    /// Bounds of the hittable triangles and the spheres, or `None` for an empty scene.
     pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
-        self.bvh.bounds
+        match (self.bvh.bounds, self.shapes.bounds) {
+            (Some(a), Some(b)) => Some((a.0.min(b.0), a.1.max(b.1))),
+            (a, b) => a.or(b),
+        }
     }
 
     /// Number of triangles over all meshes (hittable or not).
@@ -96,7 +144,9 @@ impl Scene {
     /// The closest hit by testing every triangle, with the same triangle test as the BVH: the
     /// reference the BVH is tested against. O(triangles) per ray.
     pub fn intersect_brute_force(&self, ray: &Ray) -> Option<Hit> {
-        self.bvh.brute_force(ray).map(|h| self.bvh.hit_record(&h))
+        let tri = self.bvh.brute_force(ray).map(|h| self.bvh.hit_record(&h));
+        let bounded = Ray { tfar: tri.map_or(ray.tfar, |h| h.t), ..*ray };
+        self.shapes.brute_force(&bounded).or(tri)
     }
 
     pub(crate) fn bvh(&self) -> &Bvh {
@@ -109,27 +159,46 @@ impl Scene {
     }
 }
 
+/// Queries of a scene with spheres walk the triangle tree first, then the sphere tree with each
+/// ray's interval cut to its triangle hit (or, for any-hit queries, only the rays the triangles
+/// left unoccluded). Scenes without spheres pay one branch per query.
 impl Query for Scene {
     fn intersect(&self, ray: &Ray) -> Option<Hit> {
-        self.bvh.trace1::<false>(ray).map(|h| self.bvh.hit_record(&h))
+        let tri = self.bvh.trace1::<false>(ray).map(|h| self.bvh.hit_record(&h));
+        if !self.has_shapes() {
+            return tri;
+        }
+        let bounded = Ray { tfar: tri.map_or(ray.tfar, |h| h.t), ..*ray };
+        self.shapes.trace1::<false>(&bounded).or(tri)
     }
 
     fn occluded(&self, ray: &Ray) -> bool {
-        self.bvh.trace1::<true>(ray).is_some()
+        self.bvh.trace1::<true>(ray).is_some() || (self.has_shapes() && self.shapes.trace1::<true>(ray).is_some())
     }
 
     fn intersect_packet_each(&self, rays: &RayPacket, mut f: impl FnMut(usize, &Hit)) {
         let mut hits = HitPacket::default();
-        let mask = self.bvh.trace_packet::<false>(rays, &mut hits);
+        let mut mask = self.bvh.trace_packet::<false>(rays, &mut hits);
+        if self.has_shapes() {
+            mask |= self.shapes.closer_packet(rays, &mut hits);
+        }
         each_hit(&hits, mask, |lane, h| f(lane, h));
     }
 
     fn intersect_packet(&self, rays: &RayPacket, hits: &mut HitPacket) {
         self.bvh.trace_packet::<false>(rays, hits);
+        if self.has_shapes() {
+            self.shapes.closer_packet(rays, hits);
+        }
     }
 
     fn occluded_packet(&self, rays: &RayPacket) -> u32 {
-        self.bvh.trace_packet::<true>(rays, &mut HitPacket::default())
+        let tri = self.bvh.trace_packet::<true>(rays, &mut HitPacket::default());
+        if !self.has_shapes() || tri == rays.active & crate::simd::low_bits(PACKET_WIDTH) {
+            return tri;
+        }
+        let rest = RayPacket { active: rays.active & !tri, ..*rays };
+        tri | self.shapes.trace_packet::<true>(&rest, &mut HitPacket::default())
     }
 
     /// Trees of more than 32 MiB. Below that, nodes come from the cache, and packets of 16 (with
@@ -143,16 +212,29 @@ impl Query for Scene {
     }
 
     fn occluded_octant_rays(&self, rays: &RayStream, base: usize, ids: &[u16], octant: u32) -> u32 {
-        self.bvh.occluded_octant(rays, base, ids, octant)
+        let mut bits = self.bvh.occluded_octant(rays, base, ids, octant);
+        if self.has_shapes() {
+            for (i, &id) in ids.iter().enumerate().take(32) {
+                if bits & (1 << i) == 0 && self.shapes.trace1::<true>(&rays.get(base + id as usize)).is_some() {
+                    bits |= 1 << i;
+                }
+            }
+        }
+        bits
     }
 
     fn intersect_group(&self, rays: &[RayPacket; GROUP], hits: &mut [HitPacket; GROUP]) {
         self.bvh.trace_group(rays, hits);
+        if self.has_shapes() {
+            for (p, h) in rays.iter().zip(hits.iter_mut()) {
+                self.shapes.closer_packet(p, h);
+            }
+        }
     }
 
     fn intersect_group_each(&self, rays: &[RayPacket; GROUP], mut f: impl FnMut(usize, usize, &Hit)) {
         let mut hits = [HitPacket::default(); GROUP];
-        self.bvh.trace_group(rays, &mut hits);
+        self.intersect_group(rays, &mut hits);
         for (i, h) in hits.iter().enumerate() {
             each_hit(h, u32::MAX, |lane, h| f(i, lane, h));
         }

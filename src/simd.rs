@@ -122,6 +122,72 @@ macro_rules! fma {
 }
 fma!(f32x4, f32x8, f32x16);
 
+/// The lane operations the shape kernels are written against once for every width: four
+/// lanes (one ray against a leaf block), sixteen (a packet against one shape).
+pub(crate) trait Lanes:
+    Fma
+    + core::ops::Add<Output = Self>
+    + core::ops::Sub<Output = Self>
+    + core::ops::Div<Output = Self>
+    + core::ops::Neg<Output = Self>
+    + core::ops::BitAnd<Output = Self>
+    + core::ops::BitOr<Output = Self>
+    + core::ops::Not<Output = Self>
+{
+    fn splat(x: f32) -> Self;
+    fn sqrt(self) -> Self;
+    /// `self` with the sign of `s`.
+    fn copysign(self, s: Self) -> Self;
+    fn min(self, b: Self) -> Self;
+    fn max(self, b: Self) -> Self;
+    /// All bits set where `self < b`.
+    fn lt(self, b: Self) -> Self;
+    /// All bits set where `self <= b`.
+    fn le(self, b: Self) -> Self;
+    /// Per lane: `t` where the mask `self` is set, else `f`.
+    fn sel(self, t: Self, f: Self) -> Self;
+}
+
+macro_rules! lanes {
+    ($($f:ty),*) => {$(
+        impl Lanes for $f {
+            #[inline(always)]
+            fn splat(x: f32) -> Self {
+                <$f>::splat(x)
+            }
+            #[inline(always)]
+            fn sqrt(self) -> Self {
+                <$f>::sqrt(self)
+            }
+            #[inline(always)]
+            fn copysign(self, s: Self) -> Self {
+                <$f>::copysign(self, s)
+            }
+            #[inline(always)]
+            fn min(self, b: Self) -> Self {
+                self.fast_min(b)
+            }
+            #[inline(always)]
+            fn max(self, b: Self) -> Self {
+                self.fast_max(b)
+            }
+            #[inline(always)]
+            fn lt(self, b: Self) -> Self {
+                self.simd_lt(b)
+            }
+            #[inline(always)]
+            fn le(self, b: Self) -> Self {
+                self.simd_le(b)
+            }
+            #[inline(always)]
+            fn sel(self, t: Self, f: Self) -> Self {
+                self.select(t, f)
+            }
+        }
+    )*};
+}
+lanes!(f32x4, f32x8, f32x16);
+
 /// Lane count of a ray packet (K in Embree's naming): 16 rays, a 4×4 pixel tile.
 pub const PACKET_WIDTH: usize = 16;
 

@@ -14,6 +14,7 @@ use rayon::prelude::*;
 use super::node::{EMPTY, MAX_LEAF_BLOCKS, Node, WIDTH, is_leaf, leaf_blocks, leaf_ref};
 use super::traverse::BoxTest;
 use crate::geometry::triangle::{BLOCK, TriangleTest};
+use crate::shapes::SphereTest;
 use crate::simd::trunc4;
 
 /// Builder settings. Costs are per node visit and per block test, as in Embree's statistics.
@@ -35,6 +36,8 @@ pub struct BuildConfig {
     pub triangle_test: TriangleTest,
     /// The ray–box test traversal uses.
     pub box_test: BoxTest,
+    /// The ray–sphere test for a scene's spheres ([`SphereSet`](crate::SphereSet)).
+    pub sphere_test: SphereTest,
     /// References per triangle that spatial splits may create, at most (1.0: no spatial splits,
     /// the default; [`high`](Self::high): 1.2, Embree HIGH's default).
     pub split_factor: f32,
@@ -52,6 +55,7 @@ impl Default for BuildConfig {
             parallel_threshold: 1024,
             triangle_test: TriangleTest::MollerTrumbore,
             box_test: BoxTest::Conservative,
+            sphere_test: SphereTest::Robust,
             split_factor: 1.0,
         }
     }

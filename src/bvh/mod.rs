@@ -31,6 +31,8 @@ pub struct BuildStats {
     pub build_ms: f64,
     /// Triangles in the BVH (the hittable ones).
     pub triangles: usize,
+    /// Analytic shapes (spheres) in the tree: a sphere tree's count (its `triangles` are 0).
+    pub shapes: usize,
     /// Triangles left out: NaN/infinite corners or zero area. They can never be hit.
     pub skipped_triangles: usize,
     /// Inner nodes of the tree.
@@ -214,31 +216,7 @@ impl Bvh {
         if size.blocks > MAX_BLOCK_INDEX {
             return Err(Error::TooManyTriangles(total));
         }
-        // Nodes and blocks on transparent huge pages where the OS grants them (`crate::sys`).
-        let mut nodes: Vec<Node> = crate::sys::huge_vec(size.nodes);
-        // Small trees are appended in one pass; large ones copied in parallel into arrays of
-        // default values (their freshly mapped pages fault on both threads).
-        let big = parallel && size.nodes >= PLACE_PARALLEL_NODES;
-        let mut leaves: Vec<(usize, usize)> = if big {
-            rayon::join(
-                || nodes.par_extend((0..size.nodes).into_par_iter().map(|_| Node::default())),
-                || (0..size.leaves).into_par_iter().map(|_| (0, 0)).collect(),
-            )
-            .1
-        } else {
-            Vec::with_capacity(size.leaves)
-        };
-        let (root, bounds, cost) = match tree {
-            None => (EMPTY, None, SubtreeCost::default()),
-            Some(t) => {
-                if big {
-                    place(t.chunk, &mut nodes, &mut leaves, 0, 0);
-                } else {
-                    append(t.chunk, &mut nodes, &mut leaves, 0);
-                }
-                (t.root, Some((Vec3::from(t.bounds.lo), Vec3::from(t.bounds.hi))), t.cost)
-            }
-        };
+        let PlacedTree { nodes, leaves, root, bounds, cost } = place_tree(tree, parallel);
         // One entry per block, `(first primitive, primitives)`, so that the blocks are filled by an
         // indexed parallel collect straight into their final vector.
         let sources: Vec<(usize, usize)> = leaves
@@ -273,7 +251,7 @@ impl Bvh {
             stats: BuildStats::default(),
             prefetch: false,
         };
-        bvh.stats = bvh.compute_stats(cost, size.leaves, unique, skipped);
+        bvh.stats = bvh.compute_stats(cost, leaves.len(), unique, skipped);
         bvh.stats.references = prims.len();
         bvh.prefetch = bvh.out_of_cache();
         Ok(bvh)
@@ -295,6 +273,50 @@ impl Bvh {
             ..Default::default()
         }
     }
+}
+
+/// A built tree copied into its final node array: the nodes, each leaf's `(first reference,
+/// references)` in leaf order (leaf `i` references blocks numbered from the blocks of the leaves
+/// before it), the root, its bounds and the tree's cost.
+pub(crate) struct PlacedTree {
+    pub nodes: Vec<Node>,
+    pub leaves: Vec<(usize, usize)>,
+    pub root: u32,
+    pub bounds: Option<(Vec3, Vec3)>,
+    pub cost: SubtreeCost,
+}
+
+/// Copies the builder's chunks into arrays of the tree's final size, large trees in parallel
+/// (`parallel` and at least [`PLACE_PARALLEL_NODES`] nodes), so that the blocks of all leaves can
+/// be filled after, by whatever primitive the leaves hold.
+pub(crate) fn place_tree(tree: Option<build::Built>, parallel: bool) -> PlacedTree {
+    let size = tree.as_ref().map(|t| t.chunk.size).unwrap_or_default();
+    // Nodes and blocks on transparent huge pages where the OS grants them (`crate::sys`).
+    let mut nodes: Vec<Node> = crate::sys::huge_vec(size.nodes);
+    // Small trees are appended in one pass; large ones copied in parallel into arrays of
+    // default values (their freshly mapped pages fault on both threads).
+    let big = parallel && size.nodes >= PLACE_PARALLEL_NODES;
+    let mut leaves: Vec<(usize, usize)> = if big {
+        rayon::join(
+            || nodes.par_extend((0..size.nodes).into_par_iter().map(|_| Node::default())),
+            || (0..size.leaves).into_par_iter().map(|_| (0, 0)).collect(),
+        )
+        .1
+    } else {
+        Vec::with_capacity(size.leaves)
+    };
+    let (root, bounds, cost) = match tree {
+        None => (EMPTY, None, SubtreeCost::default()),
+        Some(t) => {
+            if big {
+                place(t.chunk, &mut nodes, &mut leaves, 0, 0);
+            } else {
+                append(t.chunk, &mut nodes, &mut leaves, 0);
+            }
+            (t.root, Some((Vec3::from(t.bounds.lo), Vec3::from(t.bounds.hi))), t.cost)
+        }
+    };
+    PlacedTree { nodes, leaves, root, bounds, cost }
 }
 
 /// Runs `f` on a thread of the current rayon pool. A build has several parallel stages; each one

@@ -146,17 +146,24 @@ impl<'a> PacketHits<'a> {
 
     /// Writes the hit of triangle `lane` of block `b` into the lanes of `valid`.
     #[inline(always)]
-    fn select(&mut self, valid: Pf, b: &TriBlock, test: TriangleTest, lane: usize, (t, u, v): (Pf, Pf, Pf)) {
-        let h = &mut *self.hit;
+    fn select(&mut self, valid: Pf, b: &TriBlock, test: TriangleTest, lane: usize, tuv: (Pf, Pf, Pf)) {
         let ng = b.ng(test, lane);
+        let ng = [Pf::splat(ng.x), Pf::splat(ng.y), Pf::splat(ng.z)];
+        self.select_hit(valid, tuv, ng, b.prim[lane], b.geom_id(test, lane));
+    }
+
+    /// Writes a hit on primitive `prim` of geometry `geom` into the lanes of `valid`.
+    #[inline(always)]
+    pub fn select_hit(&mut self, valid: Pf, (t, u, v): (Pf, Pf, Pf), ng: [Pf; 3], prim: u32, geom: u32) {
+        let h = &mut *self.hit;
         sel(&mut h.t, valid, t);
         sel(&mut h.u, valid, u);
         sel(&mut h.v, valid, v);
-        sel(&mut h.ng_x, valid, Pf::splat(ng.x));
-        sel(&mut h.ng_y, valid, Pf::splat(ng.y));
-        sel(&mut h.ng_z, valid, Pf::splat(ng.z));
-        sel_id(&mut h.prim_id, valid, b.prim[lane]);
-        sel_id(&mut h.geom_id, valid, b.geom_id(test, lane));
+        sel(&mut h.ng_x, valid, ng[0]);
+        sel(&mut h.ng_y, valid, ng[1]);
+        sel(&mut h.ng_z, valid, ng[2]);
+        sel_id(&mut h.prim_id, valid, prim);
+        sel_id(&mut h.geom_id, valid, geom);
     }
 }
 

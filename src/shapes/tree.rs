@@ -1,0 +1,376 @@
+//! The BVH over a scene's spheres: built by the same binned SAH builder as the triangle BVH (from
+//! boxes and centroids), placed in the same wide nodes, walked by the same single-ray and packet
+//! walks (`bvh::traverse`), with sphere blocks of [`BLOCK`] at the leaves.
+
+use std::time::Instant;
+
+use glam::{Vec3, Vec3A};
+use rayon::prelude::*;
+
+use super::SphereSet;
+use super::sphere::{self, SphereBlock, SphereTest};
+use crate::bvh::build::{self, Aabb, PrimRef};
+use crate::bvh::node::{EMPTY, MAX_BLOCK_INDEX, Node, leaf_blocks};
+use crate::bvh::traverse::{
+    BoxRay, LeafHit, PacketBoxes, PacketHits, SlabTerms, Stack, Tree, each_lane_alone, walk_packet, walk1, with_stack,
+};
+use crate::bvh::{BoxTest, BuildConfig, BuildStats, FAR_MEMORY_BYTES, PlacedTree, on_pool, place_tree};
+use crate::error::{Error, Result};
+use crate::geometry::triangle::BLOCK;
+use crate::ray::{Hit, HitPacket, INVALID_ID, PACKET_WIDTH, Ray, RayPacket};
+use crate::simd::*;
+
+/// One sphere test chosen at compile time, so that each walk is compiled for one form.
+pub(crate) trait SphereKernel {
+    const TEST: SphereTest;
+}
+pub(crate) struct GeometricK;
+pub(crate) struct AlgebraicK;
+pub(crate) struct RobustK;
+impl SphereKernel for GeometricK {
+    const TEST: SphereTest = SphereTest::Geometric;
+}
+impl SphereKernel for AlgebraicK {
+    const TEST: SphereTest = SphereTest::Algebraic;
+}
+impl SphereKernel for RobustK {
+    const TEST: SphereTest = SphereTest::Robust;
+}
+
+/// Evaluates `$body` with `$k` bound to the sphere kernel and `$c` to the box-test flag.
+macro_rules! dispatch_spheres {
+    ($test:expr, $boxes:expr, |$k:ident, $c:ident| $body:expr) => {
+        match ($test, $boxes) {
+            (SphereTest::Geometric, BoxTest::Conservative) => dispatch_spheres!(@arm GeometricK, true, $k, $c, $body),
+            (SphereTest::Geometric, BoxTest::Fast) => dispatch_spheres!(@arm GeometricK, false, $k, $c, $body),
+            (SphereTest::Algebraic, BoxTest::Conservative) => dispatch_spheres!(@arm AlgebraicK, true, $k, $c, $body),
+            (SphereTest::Algebraic, BoxTest::Fast) => dispatch_spheres!(@arm AlgebraicK, false, $k, $c, $body),
+            (SphereTest::Robust, BoxTest::Conservative) => dispatch_spheres!(@arm RobustK, true, $k, $c, $body),
+            (SphereTest::Robust, BoxTest::Fast) => dispatch_spheres!(@arm RobustK, false, $k, $c, $body),
+        }
+    };
+    (@arm $kernel:ty, $cons:expr, $k:ident, $c:ident, $body:expr) => {{
+        type $k = $kernel;
+        const $c: bool = $cons;
+        $body
+    }};
+}
+
+/// A built BVH over spheres.
+#[derive(Clone, Debug)]
+pub(crate) struct SphereBvh {
+    pub nodes: Vec<Node>,
+    pub blocks: Vec<SphereBlock>,
+    pub root: u32,
+    pub bounds: Option<(Vec3, Vec3)>,
+    pub test: SphereTest,
+    pub box_test: BoxTest,
+    pub stats: BuildStats,
+    pub prefetch: bool,
+}
+
+impl SphereBvh {
+    /// Whether the tree holds no sphere.
+    #[inline(always)]
+    pub fn is_empty(&self) -> bool {
+        self.root == EMPTY
+    }
+
+    /// Builds over every sphere of `sets`, set `s` being geometry `geom_base + s`.
+    pub fn build(sets: &[SphereSet], geom_base: usize, cfg: &BuildConfig) -> Result<Self> {
+        let start = Instant::now();
+        let total: usize = sets.iter().map(|s| s.len()).sum();
+        if total.div_ceil(BLOCK) > MAX_BLOCK_INDEX || total >= u32::MAX as usize {
+            return Err(Error::TooManyTriangles(total));
+        }
+        if geom_base + sets.len() >= u32::MAX as usize {
+            return Err(Error::TooManyGeometries(geom_base + sets.len()));
+        }
+        let parallel = total >= cfg.parallel_threshold;
+        let mut bvh = if parallel {
+            on_pool(|| Self::build_untimed(sets, geom_base, cfg, parallel))
+        } else {
+            Self::build_untimed(sets, geom_base, cfg, parallel)
+        };
+        bvh.stats.build_ms = start.elapsed().as_secs_f64() * 1e3;
+        Ok(bvh)
+    }
+
+    fn build_untimed(sets: &[SphereSet], geom_base: usize, cfg: &BuildConfig, parallel: bool) -> Self {
+        // One global id per sphere: the sets' spheres numbered one after another.
+        let offsets: Vec<usize> = sets
+            .iter()
+            .scan(0usize, |acc, s| {
+                let o = *acc;
+                *acc += s.len();
+                Some(o)
+            })
+            .collect();
+        let locate = |id: usize| {
+            let g = offsets.partition_point(|&o| o <= id) - 1;
+            (g, id - offsets[g])
+        };
+        let prim = |(g, i): (usize, usize), id: usize| {
+            let (c, r) = sets[g].sphere(i);
+            let (c, r) = (Vec3A::from(c), Vec3A::splat(r));
+            PrimRef::new(Aabb { lo: c - r, hi: c + r }, id as u32)
+        };
+        let mut prims: Vec<PrimRef> = sets
+            .iter()
+            .enumerate()
+            .flat_map(|(g, s)| (0..s.len()).map(move |i| (g, i)))
+            .enumerate()
+            .map(|(id, gi)| prim(gi, id))
+            .collect();
+        let tree = build::build(&mut prims, cfg);
+        let PlacedTree { nodes, leaves, root, bounds, cost } = place_tree(tree, parallel);
+        let sources: Vec<(usize, usize)> = leaves
+            .iter()
+            .flat_map(|&(start, count)| {
+                (start..start + count).step_by(BLOCK).map(move |s| (s, (start + count - s).min(BLOCK)))
+            })
+            .collect();
+        let make_block = |&(start, n): &(usize, usize)| {
+            let mut spheres = [(0u32, 0u32, Vec3::ZERO, 0.0f32); BLOCK];
+            for (slot, p) in spheres.iter_mut().zip(&prims[start..start + n]) {
+                let (g, i) = locate(p.id() as usize);
+                let (c, r) = sets[g].sphere(i);
+                *slot = ((geom_base + g) as u32, i as u32, c, r);
+            }
+            SphereBlock::new(&spheres[..n])
+        };
+        let blocks: Vec<SphereBlock> = if parallel {
+            sources.par_iter().with_min_len(256).map(make_block).collect()
+        } else {
+            sources.iter().map(make_block).collect()
+        };
+        let bytes = nodes.len() * size_of::<Node>() + blocks.len() * size_of::<SphereBlock>();
+        let root_area = bounds.map_or(0.0, |(lo, hi)| Aabb { lo: lo.into(), hi: hi.into() }.half_area() as f64);
+        let total = prims.len();
+        let stats = BuildStats {
+            shapes: total,
+            inner_nodes: nodes.len(),
+            leaves: leaves.len(),
+            blocks: blocks.len(),
+            references: total,
+            sah: if root_area > 0.0 { cost.sah / root_area } else { cost.sah },
+            bytes,
+            depth: cost.depth,
+            ..Default::default()
+        };
+        SphereBvh {
+            nodes,
+            blocks,
+            root,
+            bounds,
+            test: cfg.sphere_test,
+            box_test: cfg.box_test,
+            stats,
+            prefetch: bytes > FAR_MEMORY_BYTES,
+        }
+    }
+
+    /// The walks' view: nodes only (sphere blocks are not prefetched).
+    #[inline(always)]
+    fn tree(&self) -> Tree<'_> {
+        Tree { nodes: &self.nodes, blocks: &[], far_memory: self.prefetch }
+    }
+
+    /// The public record of a leaf hit of the ray `o + t d`: the normal `p − centre`.
+    #[inline(always)]
+    pub fn hit_record(&self, h: &LeafHit, o: Vec3, d: Vec3) -> Hit {
+        let b = &self.blocks[h.block as usize];
+        let lane = h.lane as usize;
+        Hit {
+            t: h.t,
+            u: 0.0,
+            v: 0.0,
+            ng: d.mul_add(Vec3::splat(h.t), o) - b.center(lane),
+            prim_id: b.prim[lane],
+            geom_id: b.geom[lane],
+            inst_id: INVALID_ID,
+        }
+    }
+
+    /// Closest hit (`ANY = false`) or first hit found (`ANY = true`) of one ray; invalid rays
+    /// miss.
+    pub fn trace1<const ANY: bool>(&self, ray: &Ray) -> Option<Hit> {
+        if self.is_empty() {
+            return None;
+        }
+        let ray = ray.read_fields();
+        if !ray.is_valid() {
+            return None;
+        }
+        let ray = ray.clamped_to_zero();
+        with_stack(|stack| {
+            dispatch_spheres!(self.test, self.box_test, |K, C| {
+                self.trace1_from_terms::<ANY, K, C>(&ray, SlabTerms::of(&ray), self.root, stack)
+            })
+        })
+        .map(|h| self.hit_record(&h, ray.origin, ray.dir))
+    }
+
+    /// The walk of one checked ray over the subtree at `root`.
+    #[inline(always)]
+    fn trace1_from_terms<const ANY: bool, K: SphereKernel, const CONS: bool>(
+        &self,
+        ray: &Ray,
+        terms: SlabTerms,
+        root: u32,
+        stack: &mut Stack,
+    ) -> Option<LeafHit> {
+        let base = stack.push_root(root);
+        let o = [f32x4::splat(ray.origin.x), f32x4::splat(ray.origin.y), f32x4::splat(ray.origin.z)];
+        let d = [f32x4::splat(ray.dir.x), f32x4::splat(ray.dir.y), f32x4::splat(ray.dir.z)];
+        let br = BoxRay::with_terms(terms, ray.tnear);
+        let mut tfar = ray.tfar;
+        let mut best = None;
+        walk1::<ANY, CONS>(self.tree(), &br, stack, base, &mut tfar, |leaf, tfar, _| {
+            let (start, count) = leaf_blocks(leaf);
+            for bi in start..start + count {
+                if let Some((lane, t)) = sphere::intersect1(K::TEST, &self.blocks[bi], &o, &d, ray.tnear, *tfar) {
+                    *tfar = t;
+                    best = Some(LeafHit { block: bi as u32, lane: lane as u32, t, u: 0.0, v: 0.0 });
+                    if ANY {
+                        return true;
+                    }
+                }
+            }
+            false
+        });
+        best
+    }
+
+    /// Closest hits (`ANY = false`) or occlusion (`ANY = true`) of the active lanes of a packet,
+    /// into `hit` (every lane rewritten: misses where nothing is hit); returns the lanes that
+    /// hit. Invalid rays miss.
+    pub fn trace_packet<const ANY: bool>(&self, p: &RayPacket, hit: &mut HitPacket) -> u32 {
+        let mut out = PacketHits::new(hit);
+        if !self.is_empty() {
+            with_stack(|stack| {
+                dispatch_spheres!(self.test, self.box_test, |K, C| self
+                    .trace_packet_with::<ANY, K, C>(p, &mut out, stack))
+            });
+        }
+        out.mask
+    }
+
+    #[inline(never)]
+    fn trace_packet_with<const ANY: bool, K: SphereKernel, const CONS: bool>(
+        &self,
+        p: &RayPacket,
+        out: &mut PacketHits<'_>,
+        stack: &mut Stack,
+    ) {
+        let Some((pb, mut tfar)) = PacketBoxes::new(p) else {
+            return;
+        };
+        let base = stack.push_root(self.root);
+        walk_packet::<ANY, CONS>(self.tree(), &pb, stack, base, &mut tfar, |leaf, lanes, tfar, stack| {
+            if lanes != 0 {
+                out.mask |= each_lane_alone::<ANY, _>(
+                    p,
+                    lanes,
+                    tfar,
+                    |l, ray| {
+                        let h = self.trace1_from_terms::<ANY, K, CONS>(ray, pb.slabs.lane(l), leaf, stack)?;
+                        Some((h.t, h))
+                    },
+                    |l, h| {
+                        let r = p.get(l);
+                        out.set(l, &self.hit_record(&h, r.origin, r.dir))
+                    },
+                );
+                return ANY && out.mask == pb.live;
+            }
+            self.leaf_packet::<ANY, K>(leaf, &pb, tfar, out)
+        });
+    }
+
+    /// Tests the spheres of `leaf` against the open lanes of a packet (see the triangle BVH's
+    /// `leaf_packet`).
+    #[inline(always)]
+    fn leaf_packet<const ANY: bool, K: SphereKernel>(
+        &self,
+        leaf: u32,
+        pb: &PacketBoxes,
+        tfar: &mut Pf,
+        out: &mut PacketHits<'_>,
+    ) -> bool {
+        let (start, count) = leaf_blocks(leaf);
+        let active = pb.tnear.simd_le(*tfar);
+        for bi in start..start + count {
+            let blk = &self.blocks[bi];
+            for lane in 0..BLOCK {
+                if blk.prim[lane] == u32::MAX {
+                    break;
+                }
+                let (valid, t) = sphere::intersect_packet(K::TEST, blk, lane, &pb.o, &pb.d, pb.tnear, *tfar);
+                let valid = valid & active;
+                let bits = valid.to_bitmask();
+                if bits == 0 {
+                    continue;
+                }
+                out.mask |= bits;
+                if ANY {
+                    *tfar = valid.select(Pf::splat(f32::NEG_INFINITY), *tfar);
+                    if out.mask == pb.live {
+                        return true;
+                    }
+                    continue;
+                }
+                *tfar = valid.select(t, *tfar);
+                let c = blk.center(lane);
+                let ng = [
+                    t.mul_add(pb.d[0], pb.o[0]) - Pf::splat(c.x),
+                    t.mul_add(pb.d[1], pb.o[1]) - Pf::splat(c.y),
+                    t.mul_add(pb.d[2], pb.o[2]) - Pf::splat(c.z),
+                ];
+                let zero = Pf::splat(0.0);
+                out.select_hit(valid, (t, zero, zero), ng, blk.prim[lane], blk.geom[lane]);
+            }
+        }
+        false
+    }
+
+    /// The closest hits of a packet nearer than those already in `hits` (a first walk's, over
+    /// the scene's triangles), written over them; returns the lanes this walk hit.
+    pub fn closer_packet(&self, p: &RayPacket, hits: &mut HitPacket) -> u32 {
+        if self.is_empty() {
+            return 0;
+        }
+        let mut q = *p;
+        for l in 0..PACKET_WIDTH {
+            q.tfar[l] = q.tfar[l].min(hits.t[l]);
+        }
+        let mut mine = HitPacket::default();
+        let mask = self.trace_packet::<false>(&q, &mut mine);
+        let mut bits = mask;
+        while bits != 0 {
+            let l = bits.trailing_zeros() as usize;
+            bits &= bits - 1;
+            hits.set(l, mine.get(l));
+        }
+        mask
+    }
+
+    /// The closest hit by testing every block: the reference the tree is tested against.
+    pub fn brute_force(&self, ray: &Ray) -> Option<Hit> {
+        if !ray.is_valid() {
+            return None;
+        }
+        let ray = ray.clamped_to_zero();
+        let o = [f32x4::splat(ray.origin.x), f32x4::splat(ray.origin.y), f32x4::splat(ray.origin.z)];
+        let d = [f32x4::splat(ray.dir.x), f32x4::splat(ray.dir.y), f32x4::splat(ray.dir.z)];
+        let mut tfar = ray.tfar;
+        let mut best = None;
+        for (bi, b) in self.blocks.iter().enumerate() {
+            if let Some((lane, t)) = sphere::intersect1(self.test, b, &o, &d, ray.tnear, tfar) {
+                tfar = t;
+                best = Some(LeafHit { block: bi as u32, lane: lane as u32, t, u: 0.0, v: 0.0 });
+            }
+        }
+        best.map(|h| self.hit_record(&h, ray.origin, ray.dir))
+    }
+}
