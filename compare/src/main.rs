@@ -72,6 +72,15 @@ struct Args {
     /// images to --out, then exit.
     #[arg(long)]
     render: bool,
+    /// Analytic spheres (issue 30): the sphereflake at --sphere-levels as strahl spheres and as
+    /// Embree SPHERE_POINT geometry on the same rays, the three sphere tests against float64,
+    /// and the analytic flake against its tessellations; writes spheres.md, spheres.json,
+    /// sphere_tests.png and tessellation.png to --out, then exits.
+    #[arg(long)]
+    spheres: bool,
+    /// Sphereflake levels for --spheres (level 3: 820 spheres, 6: 597,871).
+    #[arg(long, value_delimiter = ',', default_value = "3,5,6")]
+    sphere_levels: Vec<u32>,
     /// Exit with an error if any scene and class has hit/miss agreement below this fraction.
     #[arg(long)]
     min_agreement: Option<f64>,
@@ -141,6 +150,16 @@ fn main() -> anyhow::Result<()> {
         return render_comparison(&args, &pool);
     }
     let device = embree::Device::new(&format!("threads={}", args.threads))?;
+    if args.spheres {
+        if let Some(&l) = args.sphere_levels.iter().find(|&&l| l > 7) {
+            bail!("--sphere-levels {l}: at most 7 (4.8 million spheres)");
+        }
+        let settings =
+            compare::spheres::Settings { levels: args.sphere_levels.clone(), width: args.width, passes: args.passes };
+        let r = compare::spheres::run(&settings, &pool, &device, &args.out, |step| eprintln!("spheres: {step}"))?;
+        print!("{}", compare::spheres::markdown(&r));
+        return Ok(());
+    }
     if let Some(rays) = &args.trace_rays {
         return trace_file(&args, rays, &pool, &device);
     }

@@ -250,7 +250,7 @@ pub fn build_report(results: &[SceneResult], threads: usize, width: u32, passes:
     }
 }
 
-fn today() -> String {
+pub(crate) fn today() -> String {
     std::process::Command::new("date")
         .arg("-u")
         .arg("+%Y-%m-%d %H:%M UTC")
@@ -260,7 +260,7 @@ fn today() -> String {
         .unwrap_or_default()
 }
 
-fn machine() -> String {
+pub(crate) fn machine() -> String {
     let cpu = std::fs::read_to_string("/proc/cpuinfo")
         .ok()
         .and_then(|s| {
@@ -273,7 +273,7 @@ fn machine() -> String {
     format!("{cpu}, {cores} cores visible")
 }
 
-fn commit() -> String {
+pub(crate) fn commit() -> String {
     std::process::Command::new("git")
         // This checkout's commit, wherever the harness is run from.
         .args(["-C", env!("CARGO_MANIFEST_DIR"), "rev-parse", "--short", "HEAD"])

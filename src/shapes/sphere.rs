@@ -82,12 +82,39 @@ impl SphereBlock {
     }
 }
 
-/// Both roots `t0 ≤ t1` of the ray `o + t d` against spheres `c, r` (lane by lane), and the lanes
+/// Rays in lanes, with what every sphere test needs of them alone: `a = d·d` and its reciprocal,
+/// computed once per ray (or packet) instead of once per block.
+#[derive(Clone, Copy)]
+pub(crate) struct RayLanes<V> {
+    pub o: [V; 3],
+    pub d: [V; 3],
+    pub a: V,
+    pub inv_a: V,
+}
+
+impl<V: Lanes> RayLanes<V> {
+    #[inline(always)]
+    pub fn new(o: [V; 3], d: [V; 3]) -> Self {
+        let a = dot(d, d);
+        Self { o, d, a, inv_a: V::splat(1.0) / a }
+    }
+}
+
+impl RayLanes<f32x4> {
+    /// One ray in all four lanes.
+    #[inline(always)]
+    pub fn splat(o: Vec3, d: Vec3) -> Self {
+        let s = |v: Vec3| [f32x4::splat(v.x), f32x4::splat(v.y), f32x4::splat(v.z)];
+        Self::new(s(o), s(d))
+    }
+}
+
+/// Both roots `t0 ≤ t1` of the rays `ray` against spheres `c, r` (lane by lane), and the lanes
 /// where the line meets the sphere at all (all bits set). Other lanes hold anything.
 #[inline(always)]
-pub(crate) fn roots<V: Lanes>(test: SphereTest, c: [V; 3], r: V, o: [V; 3], d: [V; 3]) -> (V, V, V) {
+pub(crate) fn roots<V: Lanes>(test: SphereTest, c: [V; 3], r: V, ray: &RayLanes<V>) -> (V, V, V) {
     let zero = V::splat(0.0);
-    let a = dot(d, d);
+    let RayLanes { o, d, a, inv_a } = *ray;
     let r2 = r * r;
     match test {
         SphereTest::Geometric => {
@@ -96,7 +123,6 @@ pub(crate) fn roots<V: Lanes>(test: SphereTest, c: [V; 3], r: V, o: [V; 3], d: [
             let l = [c[0] - o[0], c[1] - o[1], c[2] - o[2]];
             let tca = dot(l, d);
             let l2 = dot(l, l);
-            let inv_a = V::splat(1.0) / a;
             // Early out (the seeds): an origin outside the sphere with the centre behind it.
             let away = r2.lt(l2) & tca.lt(zero);
             let d2 = l2 - tca * tca * inv_a;
@@ -111,14 +137,12 @@ pub(crate) fn roots<V: Lanes>(test: SphereTest, c: [V; 3], r: V, o: [V; 3], d: [
             let cc = dot(f, f) - r2;
             let disc = b * b - a * cc;
             let s = disc.sqrt();
-            let inv_a = V::splat(1.0) / a;
             ((-b - s) * inv_a, (-b + s) * inv_a, zero.le(disc))
         }
         SphereTest::Robust => {
             let f = [o[0] - c[0], o[1] - c[1], o[2] - c[2]];
             // b' = −f·d; the perpendicular from the centre to the line is f + (b'/a) d.
             let b = -dot(f, d);
-            let inv_a = V::splat(1.0) / a;
             let k = b * inv_a;
             let p = [k.madd(d[0], f[0]), k.madd(d[1], f[1]), k.madd(d[2], f[2])];
             let disc = r2 - dot(p, p);
@@ -133,16 +157,8 @@ pub(crate) fn roots<V: Lanes>(test: SphereTest, c: [V; 3], r: V, o: [V; 3], d: [
 /// The first hit of each lane's ray in `(tnear, tfar]`: the lanes that hit (all bits set) and
 /// their distance.
 #[inline(always)]
-pub(crate) fn first_hit<V: Lanes>(
-    test: SphereTest,
-    c: [V; 3],
-    r: V,
-    o: [V; 3],
-    d: [V; 3],
-    tnear: V,
-    tfar: V,
-) -> (V, V) {
-    let (t0, t1, meet) = roots(test, c, r, o, d);
+pub(crate) fn first_hit<V: Lanes>(test: SphereTest, c: [V; 3], r: V, ray: &RayLanes<V>, tnear: V, tfar: V) -> (V, V) {
+    let (t0, t1, meet) = roots(test, c, r, ray);
     let h0 = tnear.lt(t0) & t0.le(tfar);
     let h1 = tnear.lt(t1) & t1.le(tfar);
     (meet & (h0 | h1), h0.sel(t0, t1))
@@ -160,13 +176,12 @@ fn dot<V: Lanes>(a: [V; 3], b: [V; 3]) -> V {
 pub(crate) fn intersect1(
     test: SphereTest,
     b: &SphereBlock,
-    o: &[f32x4; 3],
-    d: &[f32x4; 3],
+    ray: &RayLanes<f32x4>,
     tnear: f32,
     tfar: f32,
 ) -> Option<(usize, f32)> {
     let row = |k: usize| f32x4::new(b.rows[k]);
-    let (valid, t) = first_hit(test, [row(0), row(1), row(2)], row(3), *o, *d, f32x4::splat(tnear), f32x4::splat(tfar));
+    let (valid, t) = first_hit(test, [row(0), row(1), row(2)], row(3), ray, f32x4::splat(tnear), f32x4::splat(tfar));
     let zero = f32x4::splat(0.0);
     crate::geometry::triangle::nearest(valid, t, zero, zero).map(|(lane, t, _, _)| (lane, t))
 }
@@ -177,13 +192,12 @@ pub(crate) fn intersect_packet(
     test: SphereTest,
     b: &SphereBlock,
     lane: usize,
-    o: &[Pf; 3],
-    d: &[Pf; 3],
+    ray: &RayLanes<Pf>,
     tnear: Pf,
     tfar: Pf,
 ) -> (Pf, Pf) {
     let s = |k: usize| Pf::splat(b.rows[k][lane]);
-    first_hit(test, [s(0), s(1), s(2)], s(3), *o, *d, tnear, tfar)
+    first_hit(test, [s(0), s(1), s(2)], s(3), ray, tnear, tfar)
 }
 
 /// Both roots of the ray `o + t d` against the sphere `c, r` in float64 with the robust form, or
@@ -209,8 +223,7 @@ mod tests {
 
     fn one(test: SphereTest, c: Vec3, r: f32, o: Vec3, d: Vec3) -> Option<(f32, f32)> {
         let s = |x: f32| f32x4::splat(x);
-        let (t0, t1, meet) =
-            roots(test, [s(c.x), s(c.y), s(c.z)], s(r), [s(o.x), s(o.y), s(o.z)], [s(d.x), s(d.y), s(d.z)]);
+        let (t0, t1, meet) = roots(test, [s(c.x), s(c.y), s(c.z)], s(r), &RayLanes::splat(o, d));
         (meet.to_bitmask() & 1 != 0).then(|| (t0.to_array()[0], t1.to_array()[0]))
     }
 
@@ -235,9 +248,10 @@ mod tests {
             assert!(one(test, c, 1.0, Vec3::new(1.01, 0.0, 0.0), Vec3::Z).is_none(), "{test:?}");
             let s = |x: f32| f32x4::splat(x);
             let v = |p: Vec3| [s(p.x), s(p.y), s(p.z)];
-            let (ok, _) = first_hit(test, v(c), s(1.0), v(Vec3::ZERO), v(-Vec3::Z), s(0.0), s(f32::INFINITY));
+            let (ok, _) =
+                first_hit(test, v(c), s(1.0), &RayLanes::splat(Vec3::ZERO, -Vec3::Z), s(0.0), s(f32::INFINITY));
             assert_eq!(ok.to_bitmask() & 1, 0, "{test:?}: the sphere lies behind the ray");
-            let (ok, t) = first_hit(test, v(c), s(1.0), v(c), v(Vec3::X), s(0.0), s(f32::INFINITY));
+            let (ok, t) = first_hit(test, v(c), s(1.0), &RayLanes::splat(c, Vec3::X), s(0.0), s(f32::INFINITY));
             assert_eq!(ok.to_bitmask() & 1, 1, "{test:?}");
             assert!((t.to_array()[0] - 1.0).abs() < 1e-6, "{test:?}");
         }

@@ -8,7 +8,7 @@ use glam::{Vec3, Vec3A};
 use rayon::prelude::*;
 
 use super::SphereSet;
-use super::sphere::{self, SphereBlock, SphereTest};
+use super::sphere::{self, RayLanes, SphereBlock, SphereTest};
 use crate::bvh::build::{self, Aabb, PrimRef};
 use crate::bvh::node::{EMPTY, MAX_BLOCK_INDEX, Node, leaf_blocks};
 use crate::bvh::traverse::{
@@ -221,15 +221,14 @@ impl SphereBvh {
         stack: &mut Stack,
     ) -> Option<LeafHit> {
         let base = stack.push_root(root);
-        let o = [f32x4::splat(ray.origin.x), f32x4::splat(ray.origin.y), f32x4::splat(ray.origin.z)];
-        let d = [f32x4::splat(ray.dir.x), f32x4::splat(ray.dir.y), f32x4::splat(ray.dir.z)];
+        let lanes = RayLanes::splat(ray.origin, ray.dir);
         let br = BoxRay::with_terms(terms, ray.tnear);
         let mut tfar = ray.tfar;
         let mut best = None;
         walk1::<ANY, CONS>(self.tree(), &br, stack, base, &mut tfar, |leaf, tfar, _| {
             let (start, count) = leaf_blocks(leaf);
             for bi in start..start + count {
-                if let Some((lane, t)) = sphere::intersect1(K::TEST, &self.blocks[bi], &o, &d, ray.tnear, *tfar) {
+                if let Some((lane, t)) = sphere::intersect1(K::TEST, &self.blocks[bi], &lanes, ray.tnear, *tfar) {
                     *tfar = t;
                     best = Some(LeafHit { block: bi as u32, lane: lane as u32, t, u: 0.0, v: 0.0 });
                     if ANY {
@@ -267,6 +266,7 @@ impl SphereBvh {
             return;
         };
         let base = stack.push_root(self.root);
+        let rl = RayLanes::new(pb.o, pb.d);
         walk_packet::<ANY, CONS>(self.tree(), &pb, stack, base, &mut tfar, |leaf, lanes, tfar, stack| {
             if lanes != 0 {
                 out.mask |= each_lane_alone::<ANY, _>(
@@ -284,7 +284,7 @@ impl SphereBvh {
                 );
                 return ANY && out.mask == pb.live;
             }
-            self.leaf_packet::<ANY, K>(leaf, &pb, tfar, out)
+            self.leaf_packet::<ANY, K>(leaf, &pb, &rl, tfar, out)
         });
     }
 
@@ -295,6 +295,7 @@ impl SphereBvh {
         &self,
         leaf: u32,
         pb: &PacketBoxes,
+        lanes: &RayLanes<Pf>,
         tfar: &mut Pf,
         out: &mut PacketHits<'_>,
     ) -> bool {
@@ -306,7 +307,7 @@ impl SphereBvh {
                 if blk.prim[lane] == u32::MAX {
                     break;
                 }
-                let (valid, t) = sphere::intersect_packet(K::TEST, blk, lane, &pb.o, &pb.d, pb.tnear, *tfar);
+                let (valid, t) = sphere::intersect_packet(K::TEST, blk, lane, lanes, pb.tnear, *tfar);
                 let valid = valid & active;
                 let bits = valid.to_bitmask();
                 if bits == 0 {
@@ -361,12 +362,11 @@ impl SphereBvh {
             return None;
         }
         let ray = ray.clamped_to_zero();
-        let o = [f32x4::splat(ray.origin.x), f32x4::splat(ray.origin.y), f32x4::splat(ray.origin.z)];
-        let d = [f32x4::splat(ray.dir.x), f32x4::splat(ray.dir.y), f32x4::splat(ray.dir.z)];
+        let lanes = RayLanes::splat(ray.origin, ray.dir);
         let mut tfar = ray.tfar;
         let mut best = None;
         for (bi, b) in self.blocks.iter().enumerate() {
-            if let Some((lane, t)) = sphere::intersect1(self.test, b, &o, &d, ray.tnear, tfar) {
+            if let Some((lane, t)) = sphere::intersect1(self.test, b, &lanes, ray.tnear, tfar) {
                 tfar = t;
                 best = Some(LeafHit { block: bi as u32, lane: lane as u32, t, u: 0.0, v: 0.0 });
             }
