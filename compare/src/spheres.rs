@@ -139,18 +139,35 @@ fn far_camera(k: f32) -> Camera {
     Camera::look_at(at + (eye - at) * k, at, Vec3::Y, fov.to_degrees())
 }
 
-/// Median Mrays/s of `f` (which traces `n` rays) over `passes` passes after one warm-up.
-fn mrays(pool: &rayon::ThreadPool, n: usize, passes: usize, mut f: impl FnMut() + Send) -> f64 {
-    let mut s = Vec::new();
+/// Median Mrays/s of each scene's coherent closest-hit stream over `rays`, the scenes timed in
+/// interleaved passes (one warm-up pass, then `passes`, each starting one scene later), so that
+/// the machine's drift falls on all of them alike. Also returns each scene's hits.
+fn interleaved_mrays(
+    pool: &rayon::ThreadPool,
+    scenes: &[Scene],
+    rays: &RayStream,
+    passes: usize,
+) -> (Vec<f64>, Vec<HitStream>) {
+    let mut secs = vec![Vec::new(); scenes.len()];
+    let mut hits = vec![HitStream::default(); scenes.len()];
     for pass in 0..=passes {
-        let t = Instant::now();
-        pool.install(&mut f);
-        if pass > 0 {
-            s.push(t.elapsed().as_secs_f64());
+        for k in 0..scenes.len() {
+            let i = (pass + k) % scenes.len();
+            let t = Instant::now();
+            pool.install(|| scenes[i].intersect_stream_par(rays, &mut hits[i], Coherence::Coherent));
+            if pass > 0 {
+                secs[i].push(t.elapsed().as_secs_f64());
+            }
         }
     }
-    s.sort_by(f64::total_cmp);
-    n as f64 / s[s.len() / 2] / 1e6
+    let m = secs
+        .iter_mut()
+        .map(|s| {
+            s.sort_by(f64::total_cmp);
+            rays.len() as f64 / s[s.len() / 2] / 1e6
+        })
+        .collect();
+    (m, hits)
 }
 
 /// The float64 truth for one ray over spheres: the nearest root in `(tnear, tfar]`, the sphere,
@@ -437,18 +454,21 @@ fn run_methods(settings: &Settings, pool: &rayon::ThreadPool) -> anyhow::Result<
     let w = settings.width.min(512);
     let (near, _) = raygen::primary(&near_camera(), w, w);
     let (far, _) = raygen::primary(&far_camera(1000.0), w, w);
+    let scenes = SphereTest::ALL
+        .iter()
+        .map(|&test| {
+            let cfg = BuildConfig { sphere_test: test, ..BuildConfig::default() };
+            Ok(pool.install(|| Scene::build_with_spheres(vec![], vec![set.clone()], &cfg))?)
+        })
+        .collect::<anyhow::Result<Vec<Scene>>>()?;
+    let (speeds, near_hits) = interleaved_mrays(pool, &scenes, &near, settings.passes);
     let mut rows = Vec::new();
-    for test in SphereTest::ALL {
-        let cfg = BuildConfig { sphere_test: test, ..BuildConfig::default() };
-        let scene = pool.install(|| Scene::build_with_spheres(vec![], vec![set.clone()], &cfg))?;
+    for (k, test) in SphereTest::ALL.into_iter().enumerate() {
+        let (near_t_error, near_wrong, _) = pool.install(|| against_truth(&spheres, &near, &near_hits[k]));
         let mut hits = HitStream::default();
-        let m = mrays(pool, near.len(), settings.passes, || {
-            scene.intersect_stream_par(&near, &mut hits, Coherence::Coherent)
-        });
-        let (near_t_error, near_wrong, _) = pool.install(|| against_truth(&spheres, &near, &hits));
-        pool.install(|| scene.intersect_stream_par(&far, &mut hits, Coherence::Coherent));
+        pool.install(|| scenes[k].intersect_stream_par(&far, &mut hits, Coherence::Coherent));
         let (far_t_error, far_wrong, _) = pool.install(|| against_truth(&spheres, &far, &hits));
-        rows.push(MethodRow { test: test.name(), mrays: m, near_t_error, far_t_error, near_wrong, far_wrong });
+        rows.push(MethodRow { test: test.name(), mrays: speeds[k], near_t_error, far_t_error, near_wrong, far_wrong });
     }
     Ok(rows)
 }
@@ -458,36 +478,36 @@ fn run_tessellations(settings: &Settings, pool: &rayon::ThreadPool) -> anyhow::R
     let spheres: Vec<(Vec3, f32)> = (0..set.len()).map(|i| set.sphere(i)).collect();
     let w = settings.width.min(512);
     let (rays, _) = raygen::primary(&near_camera(), w, w);
-    let mut rows = Vec::new();
-    let mut measure = |model: String, scene: Scene, primitives: usize, bytes: usize, build_ms: f64| {
-        let mut hits = HitStream::default();
-        let m = mrays(pool, rays.len(), settings.passes, || {
-            scene.intersect_stream_par(&rays, &mut hits, Coherence::Coherent)
-        });
-        let (_, wrong, nerrs) = pool.install(|| against_truth(&spheres, &rays, &hits));
-        let mean = nerrs.iter().sum::<f64>() / nerrs.len().max(1) as f64;
-        let max = nerrs.iter().copied().fold(0.0, f64::max);
-        rows.push(TessRow {
-            model,
-            primitives,
-            bytes,
-            build_ms,
-            mrays: m,
-            silhouette_error: wrong,
-            normal_error_mean: mean,
-            normal_error_max: max,
-        });
-    };
+    // (model, primitives, bytes of tree and geometry, build ms) per scene, all built first so
+    // that their passes interleave.
+    let mut models = Vec::new();
+    let mut scenes = Vec::new();
     let analytic = pool.install(|| Scene::build_with_spheres(vec![], vec![set.clone()], &BuildConfig::default()))?;
     let st = analytic.sphere_stats().clone();
-    measure("analytic".into(), analytic, set.len(), st.bytes + set.bytes(), st.build_ms);
+    models.push(("analytic".to_string(), set.len(), st.bytes + set.bytes(), st.build_ms));
+    scenes.push(analytic);
     for (stacks, slices) in [(6, 12), (12, 24), (24, 48), (48, 96)] {
         let mesh = procedural::sphereflake(3, stacks, slices);
         let tris = mesh.triangle_count();
         let mesh_bytes = mesh.positions().len() * 12 + tris * 12;
         let scene = pool.install(|| Scene::build(vec![mesh], &BuildConfig::default()))?;
-        let (bytes, ms) = (scene.stats().bytes + mesh_bytes, scene.stats().build_ms);
-        measure(format!("{stacks}×{slices}"), scene, tris, bytes, ms);
+        models.push((format!("{stacks}×{slices}"), tris, scene.stats().bytes + mesh_bytes, scene.stats().build_ms));
+        scenes.push(scene);
+    }
+    let (speeds, hits) = interleaved_mrays(pool, &scenes, &rays, settings.passes);
+    let mut rows = Vec::new();
+    for (k, (model, primitives, bytes, build_ms)) in models.into_iter().enumerate() {
+        let (_, wrong, nerrs) = pool.install(|| against_truth(&spheres, &rays, &hits[k]));
+        rows.push(TessRow {
+            model,
+            primitives,
+            bytes,
+            build_ms,
+            mrays: speeds[k],
+            silhouette_error: wrong,
+            normal_error_mean: nerrs.iter().sum::<f64>() / nerrs.len().max(1) as f64,
+            normal_error_max: nerrs.iter().copied().fold(0.0, f64::max),
+        });
     }
     Ok(rows)
 }
@@ -630,7 +650,10 @@ fn charts(dir: &Path, r: &SphereReport) -> anyhow::Result<()> {
         &dir.join("sphere_tests.png"),
         "Sphere tests: speed against accuracy (camera 1000× farther)",
         "relative t error, 99.9th percentile (log; left is better)",
-        r.methods.iter().map(|m| (m.test.to_string(), m.far_t_error[1], m.mrays)).collect(),
+        r.methods
+            .iter()
+            .map(|m| (format!("{} ({:.2}% wrong hit/miss)", m.test, m.far_wrong * 100.0), m.far_t_error[1], m.mrays))
+            .collect(),
     )?;
     scatter(
         &dir.join("tessellation.png"),
@@ -638,7 +661,15 @@ fn charts(dir: &Path, r: &SphereReport) -> anyhow::Result<()> {
         "silhouette error: rays hit/missed wrongly (log; left is better)",
         r.tessellations
             .iter()
-            .map(|t| (format!("{} ({:.1} MB)", t.model, t.bytes as f64 / 1e6), t.silhouette_error.max(1e-7), t.mrays))
+            .map(|t| {
+                let mem = if t.bytes < 1_000_000 {
+                    format!("{:.0} kB", t.bytes as f64 / 1e3)
+                } else {
+                    format!("{:.1} MB", t.bytes as f64 / 1e6)
+                };
+                let zero = if t.silhouette_error == 0.0 { ", none wrong: drawn at 1e-7" } else { "" };
+                (format!("{} ({mem}{zero})", t.model), t.silhouette_error.max(1e-7), t.mrays)
+            })
             .collect(),
     )?;
     Ok(())

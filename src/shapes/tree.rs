@@ -56,6 +56,9 @@ macro_rules! dispatch_spheres {
     }};
 }
 
+/// Open lanes at or below which a packet without a frustum tests a leaf lane by lane.
+const LEAF_SWITCH: u32 = 4;
+
 /// A built BVH over spheres.
 #[derive(Clone, Debug)]
 pub(crate) struct SphereBvh {
@@ -267,7 +270,19 @@ impl SphereBvh {
         };
         let base = stack.push_root(self.root);
         let rl = RayLanes::new(pb.o, pb.d);
+        let switch = pb.frustum.is_none();
         walk_packet::<ANY, CONS>(self.tree(), &pb, stack, base, &mut tfar, |leaf, lanes, tfar, stack| {
+            // Closest hit without a frustum (incoherent packets): a leaf few lanes are still open
+            // for goes lane by lane, four spheres per test, instead of sixteen lanes per sphere.
+            // Diffuse rays, level-6 flake, 2 threads, best vs best against Embree: 0.98 before,
+            // 1.09 and 1.03 after (two runs; the machine's noise is about ±8%). Any-hit packets
+            // measured no better (1.18 against 1.25) and keep the packet test.
+            let lanes = if lanes == 0 && switch && !ANY {
+                let open = pb.live & pb.tnear.simd_le(*tfar).to_bitmask();
+                if open.count_ones() <= LEAF_SWITCH { open } else { 0 }
+            } else {
+                lanes
+            };
             if lanes != 0 {
                 out.mask |= each_lane_alone::<ANY, _>(
                     p,
