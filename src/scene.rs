@@ -153,6 +153,11 @@ impl Scene {
         &self.bvh
     }
 
+    /// The sphere tree (empty without spheres).
+    pub(crate) fn sphere_tree(&self) -> &SphereBvh {
+        &self.shapes
+    }
+
     /// Whether this scene's walks prefetch the children they enter (see [`Bvh::prefetch`]).
     pub(crate) fn set_prefetch(&mut self, on: bool) {
         self.bvh.prefetch = on;

@@ -262,3 +262,63 @@ fn persisted_scene_keeps_its_spheres() {
         assert_eq!(back.intersect(&rays.get(i)), scene.intersect(&rays.get(i)), "ray {i}");
     }
 }
+
+/// Criterion: the queries beyond the first hit see spheres: every crossing of random rays
+/// (entering and leaving roots) against brute force over the float64 roots, `contains` for
+/// points inside and outside disjoint spheres, and the closest point against brute force, in a
+/// scene that also holds a mesh.
+#[test]
+fn spatial_queries_see_spheres() {
+    use strahl::SpatialQuery;
+    let spheres: Vec<(Vec3, f32)> = (0..40)
+        .map(|i| {
+            let (x, z) = ((i % 8) as f32 * 2.5 - 9.0, (i / 8) as f32 * 2.5 - 5.0);
+            (Vec3::new(x, 0.3 * (i % 3) as f32, z), 0.4 + 0.1 * (i % 5) as f32)
+        })
+        .collect();
+    let set = SphereSet::from_pairs("grid", &spheres).unwrap();
+    let cfg = BuildConfig::default();
+    let mut floor = procedural::quad(30.0, 30.0);
+    floor.map_positions(|p| p - Vec3::Y * 2.0);
+    let scene = Scene::build_with_spheres(vec![floor], vec![set], &cfg).unwrap();
+    let rays = random_rays(500, 3);
+    let mut out = Vec::new();
+    let mut checked = 0;
+    for i in 0..rays.len() {
+        let r = rays.get(i);
+        if !r.is_valid() {
+            continue;
+        }
+        scene.all_hits(&r, &mut out);
+        let sphere_ts: Vec<f32> = out.iter().filter(|h| h.geom_id == 1).map(|h| h.t).collect();
+        let mut expect: Vec<f64> = Vec::new();
+        for &(c, rad) in &spheres {
+            if let Some((t0, t1)) = sphere_roots_f64(c.as_dvec3(), rad as f64, r.origin.as_dvec3(), r.dir.as_dvec3()) {
+                expect.extend([t0, t1].into_iter().filter(|&t| t > r.tnear.max(0.0) as f64 && t <= r.tfar as f64));
+            }
+        }
+        expect.sort_by(f64::total_cmp);
+        assert_eq!(sphere_ts.len(), expect.len(), "ray {i}: {sphere_ts:?} against {expect:?}");
+        for (a, b) in sphere_ts.iter().zip(&expect) {
+            assert!((*a as f64 - b).abs() <= 1e-5 * b.max(1.0), "ray {i}: {a} against {b}");
+        }
+        checked += expect.len();
+    }
+    assert!(checked > 50, "{checked} crossings");
+    let mut rng = Pcg32::new(5, 1);
+    for k in 0..400 {
+        let p = Vec3::new(rng.next_f32() * 22.0 - 11.0, rng.next_f32() * 2.0 - 0.8, rng.next_f32() * 14.0 - 7.0);
+        let dist = spheres.iter().map(|&(c, r)| (p - c).length() - r).fold(f32::INFINITY, f32::min);
+        if dist.abs() > 1e-3 {
+            assert_eq!(scene.contains(p), dist < 0.0, "point {k} {p}, signed distance {dist}");
+        }
+        let cp = scene.closest_point(p, f32::INFINITY).unwrap();
+        let floor_d = (p.y + 2.0).abs();
+        let expect = dist.abs().min(floor_d);
+        assert!((cp.distance - expect).abs() < 1e-4, "point {k}: {} against {expect}", cp.distance);
+        if dist.abs() < floor_d - 1e-3 {
+            assert_eq!(cp.geom_id, 1, "point {k}");
+            assert!((cp.point - p).length() - cp.distance < 1e-4);
+        }
+    }
+}

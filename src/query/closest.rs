@@ -10,6 +10,7 @@ use crate::geometry::TriangleMesh;
 use crate::instance::InstancedScene;
 use crate::ray::INVALID_ID;
 use crate::scene::Scene;
+use crate::shapes::tree::SphereBvh;
 
 /// The point of a scene nearest to a query point.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -18,13 +19,15 @@ pub struct ClosestPoint {
     pub point: Vec3,
     /// Its distance from the query point.
     pub distance: f32,
-    /// Barycentric coordinates of `point` on its triangle (as [`Hit`](crate::Hit)'s `u`, `v`).
+    /// Barycentric coordinates of `point` on its triangle (as [`Hit`](crate::Hit)'s `u`, `v`);
+    /// 0 on a sphere.
     pub u: f32,
     /// Barycentric coordinate of `v2`.
     pub v: f32,
-    /// The triangle's unnormalized geometric normal `(v1 − v0) × (v2 − v0)` in world space.
+    /// The triangle's unnormalized geometric normal `(v1 − v0) × (v2 − v0)` in world space; on a
+    /// sphere, `point − centre`.
     pub ng: Vec3,
-    /// The triangle's index within its geometry.
+    /// The triangle's (or sphere's) index within its geometry.
     pub prim_id: u32,
     /// The geometry's index.
     pub geom_id: u32,
@@ -69,6 +72,7 @@ impl Scene {
             inst_id: INVALID_ID,
         };
         closest_in(self.bvh(), &at, &mut best);
+        closest_sphere_in(self.sphere_tree(), p, &mut best);
         best.found
     }
 }
@@ -141,6 +145,43 @@ fn closest_in(bvh: &Bvh, at: &Placement<'_>, best: &mut Best) {
                         prim_id: prim,
                         geom_id: geom,
                         inst_id: at.inst_id,
+                    });
+                }
+            }
+        }
+    });
+}
+
+/// The nearest sphere surface point of a flat scene's sphere tree to `p`, improving `best`: the
+/// centre's direction scaled to the radius, in float64 (`u = v = 0`, `ng` the outward normal
+/// times the radius; from the centre itself, the point above it in +y).
+fn closest_sphere_in(tree: &SphereBvh, p: Vec3, best: &mut Best) {
+    if tree.is_empty() {
+        return;
+    }
+    let pw = p.as_dvec3();
+    walk_boxes(&tree.nodes, tree.root, p, 1.0, best, |leaf, best| {
+        let (start, count) = leaf_blocks(leaf);
+        for b in &tree.blocks[start..start + count] {
+            for lane in 0..b.prim.len() {
+                if b.prim[lane] == u32::MAX {
+                    continue;
+                }
+                let (c, r) = (b.center(lane).as_dvec3(), b.rows[3][lane] as f64);
+                let dir = (pw - c).try_normalize().unwrap_or(DVec3::Y);
+                let q = c + dir * r;
+                let d2 = (q - pw).length_squared();
+                if d2 < best.d2 || (best.found.is_none() && d2 <= best.d2) {
+                    best.d2 = d2;
+                    best.found = Some(ClosestPoint {
+                        point: q.as_vec3(),
+                        distance: d2.sqrt() as f32,
+                        u: 0.0,
+                        v: 0.0,
+                        ng: (dir * r).as_vec3(),
+                        prim_id: b.prim[lane],
+                        geom_id: b.geom[lane],
+                        inst_id: INVALID_ID,
                     });
                 }
             }

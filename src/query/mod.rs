@@ -187,6 +187,7 @@ impl SpatialQuery for Scene {
     fn for_each_hit(&self, ray: &Ray, mut f: impl FnMut(&Hit)) {
         let bvh = self.bvh();
         bvh.each_hit(ray, |h| f(&bvh.hit_record(h)));
+        self.sphere_tree().each_hit(ray, f);
     }
 
     fn closest_point(&self, p: Vec3, max_distance: f32) -> Option<ClosestPoint> {

@@ -371,6 +371,46 @@ impl SphereBvh {
         mask
     }
 
+    /// Calls `f` for every surface crossing of `ray` in `(tnear, tfar]` with a sphere (both roots
+    /// where both lie in the interval: entering and leaving), in no particular order; the
+    /// crossings a point-in-solid parity counts. Invalid rays cross nothing.
+    pub fn each_hit(&self, ray: &Ray, mut f: impl FnMut(&Hit)) {
+        if self.is_empty() || !ray.is_valid() {
+            return;
+        }
+        let ray = ray.clamped_to_zero();
+        let rl = RayLanes::splat(ray.origin, ray.dir);
+        with_stack(|stack| {
+            dispatch_spheres!(self.test, self.box_test, |K, C| {
+                let base = stack.push_root(self.root);
+                let br = BoxRay::with_terms(SlabTerms::of(&ray), ray.tnear);
+                // The walk's `tfar` stays the ray's: every subtree the ray enters is visited.
+                let mut tfar = ray.tfar;
+                walk1::<false, C>(self.tree(), &br, stack, base, &mut tfar, |leaf, tfar, _| {
+                    let (start, count) = leaf_blocks(leaf);
+                    for bi in start..start + count {
+                        let b = &self.blocks[bi];
+                        let row = |k: usize| f32x4::new(b.rows[k]);
+                        let (t0, t1, meet) = sphere::roots(K::TEST, [row(0), row(1), row(2)], row(3), &rl);
+                        let (t0, t1) = (t0.to_array(), t1.to_array());
+                        let mut bits = meet.to_bitmask();
+                        while bits != 0 {
+                            let lane = bits.trailing_zeros() as usize;
+                            bits &= bits - 1;
+                            for t in [t0[lane], t1[lane]] {
+                                if t > ray.tnear && t <= *tfar {
+                                    let h = LeafHit { block: bi as u32, lane: lane as u32, t, u: 0.0, v: 0.0 };
+                                    f(&self.hit_record(&h, ray.origin, ray.dir));
+                                }
+                            }
+                        }
+                    }
+                    false
+                });
+            })
+        });
+    }
+
     /// The closest hit by testing every block: the reference the tree is tested against.
     pub fn brute_force(&self, ray: &Ray) -> Option<Hit> {
         if !ray.is_valid() {
