@@ -132,11 +132,12 @@ pub enum Error {
         /// What is wrong, with the value.
         message: String,
     },
-    /// An instanced scene's object holds analytic shapes, which only flat scenes trace so far.
-    #[error("object {object} of an instanced scene holds analytic shapes; only flat scenes trace them so far")]
-    ShapesNotInstanced {
-        /// The object's index.
-        object: usize,
+    /// An instance places an object holding spheres by a transform that is not a similarity
+    /// (rotation or mirror, uniform scale, translation): its spheres would become ellipsoids.
+    #[error("instance {instance} places spheres by a transform that is not a rotation, uniform scale and translation")]
+    SphereInstanceNotSimilar {
+        /// The instance's index.
+        instance: usize,
     },
     /// Bytes given to `Scene::from_bytes` or `InstancedScene::from_bytes` are not a scene this
     /// version wrote, or were damaged.

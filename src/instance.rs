@@ -34,6 +34,7 @@ use crate::geometry::triangle::Kernel;
 use crate::geometry::watertight::Watertight;
 use crate::ray::{Hit, HitPacket, Ray, RayPacket};
 use crate::scene::{Query, Scene, each_hit};
+use crate::shapes::SphereSet;
 use crate::simd::{Pf, lane_mask};
 
 /// One placement of an object: `object` indexes the objects of the [`InstancedScene`], and
@@ -62,12 +63,23 @@ struct Placed {
     /// `det(M)·M⁻ᵀ`, which maps `e1 × e2` to the cross product of the moved edges, so a mirroring
     /// transform flips the normal with the winding, as flattening would.
     normal_to_world: Mat3A,
+    /// Whether the transform mirrors (`det < 0`). Sphere normals stay outward (`p − centre`), so
+    /// the walks negate a sphere hit's object normal here before the cofactor flips it back.
+    mirror: bool,
     object: u32,
     /// Index in the list the scene was built from (the hit's `inst_id`).
     id: u32,
     /// World box, for the per-lane test of packets.
     lo: [f32; 3],
     hi: [f32; 3],
+}
+
+impl Placed {
+    /// An object-space sphere hit made ready for `normal_to_world` (see [`Placed::mirror`]).
+    #[inline]
+    fn sphere_hit(&self, h: Hit) -> Hit {
+        if self.mirror { Hit { ng: -h.ng, ..h } } else { h }
+    }
 }
 
 /// Figures of a two-level build.
@@ -162,9 +174,7 @@ impl InstancedScene {
         if objects.iter().any(|o| o.tests() != (test, box_test)) {
             return Err(Error::MixedTests);
         }
-        if let Some(object) = objects.iter().position(|o| !o.spheres().is_empty()) {
-            return Err(Error::ShapesNotInstanced { object });
-        }
+
         if instances.len() > MAX_BLOCK_INDEX {
             return Err(Error::TooManyInstances(instances.len()));
         }
@@ -175,13 +185,16 @@ impl InstancedScene {
             if !is_invertible(&inst.transform) {
                 return Err(Error::BadTransform { instance: i });
             }
+            if !objects[inst.object].spheres().is_empty() && uniform_scale(&inst.transform).is_none() {
+                return Err(Error::SphereInstanceNotSimilar { instance: i });
+            }
         }
         // In parallel: up to 64 boxes of eight corners each per instance.
         let mut prims: Vec<PrimRef> = instances
             .par_iter()
             .enumerate()
             .filter_map(|(i, inst)| {
-                placed_box(objects[inst.object].bvh(), &inst.transform).map(|b| PrimRef::new(b, i as u32))
+                placed_box(&objects[inst.object], &inst.transform).map(|b| PrimRef::new(b, i as u32))
             })
             .collect();
         let cfg = BuildConfig {
@@ -215,6 +228,7 @@ impl InstancedScene {
                 Placed {
                     to_object,
                     normal_to_world: to_object.matrix3.transpose() * inst.transform.matrix3.determinant(),
+                    mirror: inst.transform.matrix3.determinant() < 0.0,
                     object: inst.object as u32,
                     id,
                     lo: b.lo.to_array(),
@@ -222,7 +236,7 @@ impl InstancedScene {
                 }
             })
             .collect();
-        let object_bytes: usize = objects.iter().map(|o| o.stats().bytes).sum();
+        let object_bytes: usize = objects.iter().map(|o| o.stats().bytes + o.sphere_stats().bytes).sum();
         // Objects out of the cache together prefetch in their walks (see the constant).
         for o in &mut objects {
             o.set_prefetch(object_bytes > INSTANCED_FAR_MEMORY_BYTES);
@@ -271,16 +285,29 @@ impl InstancedScene {
     }
 
     /// The same world as one flat [`Scene`]: every instance's meshes transformed into world space
-    /// (geometry ids numbered instance by instance, object mesh by object mesh). For comparison
+    /// (geometry ids numbered instance by instance, object mesh by object mesh), then every
+    /// instance's sphere sets moved likewise (geometry ids after all the meshes). For comparison
     /// and for small worlds; memory grows with the placed triangles.
     pub fn flatten(&self, config: &BuildConfig) -> Result<Scene> {
         let mut meshes = Vec::new();
-        for inst in &self.instances {
+        let mut spheres = Vec::new();
+        for (i, inst) in self.instances.iter().enumerate() {
             for m in self.objects[inst.object].meshes() {
                 meshes.push(m.transformed(&inst.transform));
             }
+            // Instances of objects with spheres are similarities (checked when built).
+            let s = uniform_scale(&inst.transform).unwrap_or(1.0);
+            for set in self.objects[inst.object].spheres() {
+                let moved: Vec<(Vec3, f32)> = (0..set.len())
+                    .map(|j| {
+                        let (c, r) = set.sphere(j);
+                        (inst.transform.transform_point3(c), r * s)
+                    })
+                    .collect();
+                spheres.push(SphereSet::from_pairs(format!("{}@{i}", set.name()), &moved)?);
+            }
         }
-        Scene::build(meshes, config)
+        Scene::build_with_spheres(meshes, spheres, config)
     }
 
     /// The closest hit among every instance by testing every object triangle of every instance
@@ -296,8 +323,11 @@ impl InstancedScene {
             let tfar = best.map_or(ray.tfar, |h| h.t);
             let r = object_ray(&to_object, ray, tfar);
             if let Some(h) = self.objects[inst.object].intersect_brute_force(&r) {
+                // Sphere normals stay outward under mirrors (see `Placed::mirror`).
+                let det = inst.transform.matrix3.determinant();
+                let sphere = h.geom_id as usize >= self.objects[inst.object].meshes().len();
                 best = Some(Hit {
-                    ng: to_object.matrix3.transpose() * h.ng * inst.transform.matrix3.determinant(),
+                    ng: to_object.matrix3.transpose() * h.ng * if sphere { det.abs() } else { det },
                     inst_id: i as u32,
                     ..h
                 });
@@ -306,7 +336,7 @@ impl InstancedScene {
         best
     }
 
-    fn trace1<const ANY: bool>(&self, ray: &Ray) -> Option<(u32, LeafHit)> {
+    fn trace1<const ANY: bool>(&self, ray: &Ray) -> Option<(u32, ObjHit)> {
         if self.root == EMPTY {
             return None;
         }
@@ -320,7 +350,7 @@ impl InstancedScene {
         &self,
         ray: &Ray,
         stack: &mut Stack,
-    ) -> Option<(u32, LeafHit)> {
+    ) -> Option<(u32, ObjHit)> {
         // Read field by field, as the object walks do (see `Ray::read_fields`), once for both
         // the validity check and the walk.
         let ray = ray.read_fields();
@@ -337,7 +367,7 @@ impl InstancedScene {
         ray: &Ray,
         root: u32,
         stack: &mut Stack,
-    ) -> Option<(u32, LeafHit)> {
+    ) -> Option<(u32, ObjHit)> {
         self.trace1_from_terms::<ANY, K, CONS>(ray, SlabTerms::of(ray), root, stack)
     }
 
@@ -350,7 +380,7 @@ impl InstancedScene {
         terms: SlabTerms,
         root: u32,
         stack: &mut Stack,
-    ) -> Option<(u32, LeafHit)> {
+    ) -> Option<(u32, ObjHit)> {
         let br = BoxRay::with_terms(terms, ray.tnear);
         let mut tfar = ray.tfar;
         let mut best = None;
@@ -364,9 +394,20 @@ impl InstancedScene {
                 if !(r.origin.is_finite() && r.dir.is_finite()) {
                     continue;
                 }
-                if let Some(h) = self.objects[p.object as usize].bvh().trace1_with::<ANY, false, K, CONS>(&r, stack) {
+                let object = &self.objects[p.object as usize];
+                if let Some(h) = object.bvh().trace1_with::<ANY, false, K, CONS>(&r, stack) {
                     *tfar = h.t;
-                    best = Some((k as u32, h));
+                    best = Some((k as u32, ObjHit::Tri(h)));
+                    if ANY {
+                        return true;
+                    }
+                }
+                let spheres = object.sphere_tree();
+                if !spheres.is_empty()
+                    && let Some(h) = spheres.trace1_on::<ANY, CONS>(&Ray { tfar: *tfar, ..r }, stack)
+                {
+                    *tfar = h.t;
+                    best = Some((k as u32, ObjHit::Sphere(p.sphere_hit(h))));
                     if ANY {
                         return true;
                     }
@@ -413,7 +454,7 @@ impl InstancedScene {
                     tfar,
                     |l, ray| {
                         let (k, h) = self.trace1_from_terms::<ANY, K, CONS>(ray, pb.slabs.lane(l), leaf, stack)?;
-                        Some((h.t, (k, h)))
+                        Some((h.t(), (k, h)))
                     },
                     |l, (k, h)| out.set(l, &self.world_hit(k, &self.object_hit(k, &h))),
                 );
@@ -429,6 +470,7 @@ impl InstancedScene {
                 }
                 let (q, [qo, qd]) = object_packet(&pl.to_object, &pb, *tfar, active);
                 let bvh = self.objects[pl.object as usize].bvh();
+                let spheres = self.objects[pl.object as usize].sphere_tree();
                 if !ANY && pb.frustum.is_none() && !packet_walks_object(active, spread, pl) {
                     // Incoherent closest-hit rays: each lane that enters the instance walks the
                     // object alone, as Embree's instances hand their lanes to the object's hybrid
@@ -443,27 +485,49 @@ impl InstancedScene {
                         active,
                         tfar,
                         |l, ray| {
-                            let h = bvh.trace1_from_terms::<false, K, CONS>(ray, qs.lane(l), bvh.root, stack)?;
-                            Some((h.t, h))
+                            let tri = bvh.trace1_from_terms::<false, K, CONS>(ray, qs.lane(l), bvh.root, stack);
+                            let tri = tri.map(|h| bvh.hit_record(&h));
+                            if spheres.is_empty() {
+                                return tri.map(|h| (h.t, h));
+                            }
+                            let bounded = Ray { tfar: tri.map_or(ray.tfar, |h| h.t), ..*ray };
+                            let sphere = spheres.trace1_on::<false, CONS>(&bounded, stack).map(|h| pl.sphere_hit(h));
+                            sphere.or(tri).map(|h| (h.t, h))
                         },
-                        |l, h| out.set(l, &self.world_hit(k as u32, &bvh.hit_record(&h))),
+                        |l, h| out.set(l, &self.world_hit(k as u32, &h)),
                     );
                     continue;
                 }
-                let mask = bvh.trace_packet_with::<ANY, K, CONS>(&q, &mut r, stack);
-                if mask == 0 {
-                    continue;
-                }
-                let valid = lane_mask(mask);
-                out.mask |= mask;
-                if ANY {
-                    *tfar = valid.select(Pf::splat(f32::NEG_INFINITY), *tfar);
-                    if out.mask == pb.live {
-                        return true;
+                // The object's triangles, then its spheres bounded by the triangles' hits.
+                for part in 0..2 {
+                    let mask = if part == 0 {
+                        bvh.trace_packet_with::<ANY, K, CONS>(&q, &mut r, stack)
+                    } else if spheres.is_empty() {
+                        0
+                    } else {
+                        let bounded = RayPacket { tfar: tfar.to_array(), ..q };
+                        let m = spheres.trace_packet_on::<ANY, CONS>(&bounded, &mut r, stack);
+                        if pl.mirror {
+                            for l in 0..r.t.len() {
+                                (r.ng_x[l], r.ng_y[l], r.ng_z[l]) = (-r.ng_x[l], -r.ng_y[l], -r.ng_z[l]);
+                            }
+                        }
+                        m
+                    };
+                    if mask == 0 {
+                        continue;
                     }
-                } else {
-                    *tfar = valid.select(Pf::new(r.t), *tfar);
-                    out.take_instanced(valid, &r, &pl.normal_to_world, pl.id);
+                    let valid = lane_mask(mask);
+                    out.mask |= mask;
+                    if ANY {
+                        *tfar = valid.select(Pf::splat(f32::NEG_INFINITY), *tfar);
+                        if out.mask == pb.live {
+                            return true;
+                        }
+                    } else {
+                        *tfar = valid.select(Pf::new(r.t), *tfar);
+                        out.take_instanced(valid, &r, &pl.normal_to_world, pl.id);
+                    }
                 }
             }
             false
@@ -471,10 +535,13 @@ impl InstancedScene {
         out.mask
     }
 
-    /// The hit record, in object space, of a leaf hit in placed instance `k`.
+    /// The hit record, in object space, of an object hit in placed instance `k`.
     #[inline]
-    fn object_hit(&self, k: u32, h: &LeafHit) -> Hit {
-        self.objects[self.placed[k as usize].object as usize].bvh().hit_record(h)
+    fn object_hit(&self, k: u32, h: &ObjHit) -> Hit {
+        match h {
+            ObjHit::Tri(h) => self.objects[self.placed[k as usize].object as usize].bvh().hit_record(h),
+            ObjHit::Sphere(h) => *h,
+        }
     }
 
     /// The public hit record of an object-space hit in placed instance `k`.
@@ -509,6 +576,12 @@ impl InstancedScene {
     pub(crate) fn placed_of(&self, k: usize) -> (u32, Affine3A, u32) {
         let p = &self.placed[k];
         (p.object, self.instances[p.id as usize].transform, p.id)
+    }
+
+    /// [`world_hit`](Self::world_hit) of an object-space sphere hit (normal kept outward under
+    /// mirrors), for the walks of `crate::query`.
+    pub(crate) fn world_sphere_hit_of(&self, k: u32, hit: &Hit) -> Hit {
+        self.world_hit(k, &self.placed[k as usize].sphere_hit(*hit))
     }
 
     /// [`world_hit`](Self::world_hit) for the walks of `crate::query`.
@@ -592,24 +665,57 @@ const PLACED_BOX_LEVELS: usize = 2;
 
 /// The world box of an instance of `bvh` under `m` (see [`PLACED_BOX_LEVELS`]), or `None` for an
 /// object with nothing to hit.
-fn placed_box(bvh: &crate::bvh::Bvh, m: &Affine3A) -> Option<Aabb> {
-    fn grow(bvh: &crate::bvh::Bvh, m: &Affine3A, r: u32, lo: Vec3, hi: Vec3, levels: usize, out: &mut Aabb) {
+fn placed_box(object: &Scene, m: &Affine3A) -> Option<Aabb> {
+    fn grow(nodes: &[Node], m: &Affine3A, r: u32, lo: Vec3, hi: Vec3, levels: usize, out: &mut Aabb) {
         if levels == 0 || r == EMPTY || crate::bvh::node::is_leaf(r) {
             out.grow(&world_box(m, lo, hi));
             return;
         }
-        let n = &bvh.nodes[r as usize];
+        let n = &nodes[r as usize];
         for i in 0..n.child.len() {
             if n.child[i] != EMPTY {
                 let c = |a: usize| Vec3::new(n.bounds[a][i], n.bounds[a + 2][i], n.bounds[a + 4][i]);
-                grow(bvh, m, n.child[i], c(0), c(1), levels - 1, out);
+                grow(nodes, m, n.child[i], c(0), c(1), levels - 1, out);
             }
         }
     }
-    let (lo, hi) = bvh.bounds?;
+    let (bvh, spheres) = (object.bvh(), object.sphere_tree());
     let mut out = Aabb::EMPTY;
-    grow(bvh, m, bvh.root, lo, hi, PLACED_BOX_LEVELS, &mut out);
-    Some(out)
+    for (nodes, root, bounds) in [(&bvh.nodes, bvh.root, bvh.bounds), (&spheres.nodes, spheres.root, spheres.bounds)] {
+        if let Some((lo, hi)) = bounds {
+            grow(nodes, m, root, lo, hi, PLACED_BOX_LEVELS, &mut out);
+        }
+    }
+    (out.lo.cmple(out.hi).all()).then_some(out)
+}
+
+/// An object-level hit of the instance walks: a triangle's leaf hit, or a sphere's record.
+#[derive(Clone, Copy, Debug)]
+enum ObjHit {
+    Tri(LeafHit),
+    Sphere(Hit),
+}
+
+impl ObjHit {
+    fn t(&self) -> f32 {
+        match self {
+            ObjHit::Tri(h) => h.t,
+            ObjHit::Sphere(h) => h.t,
+        }
+    }
+}
+
+/// The scale factor of a similarity transform (rotation or mirror times a uniform scale, plus a
+/// translation): the common length of its three columns, if they are orthogonal and equally long
+/// within 1e-5 relative. Spheres stay spheres only under these.
+pub(crate) fn uniform_scale(m: &Affine3A) -> Option<f32> {
+    let c = [m.matrix3.x_axis, m.matrix3.y_axis, m.matrix3.z_axis];
+    let l = c.map(|v| v.length());
+    let s = (l[0] + l[1] + l[2]) / 3.0;
+    let tol = 1e-5 * s * s;
+    let equal = l.iter().all(|&x| (x - s).abs() <= 1e-5 * s);
+    let orthogonal = c[0].dot(c[1]).abs() <= tol && c[1].dot(c[2]).abs() <= tol && c[0].dot(c[2]).abs() <= tol;
+    (s > 0.0 && s.is_finite() && equal && orthogonal).then_some(s)
 }
 
 /// The world box of an object box `lo..hi` under `m`: the bounds of its eight moved corners.
@@ -704,7 +810,7 @@ mod tests {
                 Quat::from_rotation_y(turn) * Quat::from_rotation_x(turn * 0.5),
                 Vec3::new(3.0, -2.0, 1e3),
             );
-            let b = placed_box(object.bvh(), &m).unwrap();
+            let b = placed_box(&object, &m).unwrap();
             let root = world_box(&m, lo, hi);
             // Every placed vertex inside (up to the rounding of moving a point), and the box
             // inside the moved root box.

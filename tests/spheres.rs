@@ -213,8 +213,8 @@ fn no_self_hits_leaving_the_surface() {
 }
 
 /// Criterion: bad spheres are typed errors naming the set and the sphere; bad rays miss; an
-/// empty sphere list leaves a mesh scene's answers unchanged; instancing spheres is a typed
-/// error until it is supported.
+/// empty sphere list leaves a mesh scene's answers unchanged; placing spheres by a transform
+/// that would make them ellipsoids is a typed error.
 #[test]
 fn bad_spheres_and_rays() {
     let c = vec![Vec3::ZERO, Vec3::X];
@@ -246,8 +246,12 @@ fn bad_spheres_and_rays() {
     let h = scene.intersect(&Ray::new(Vec3::Z * 3.0, -Vec3::Z)).unwrap();
     assert_eq!((h.t, h.prim_id, h.geom_id), (2.0, 0, 0));
     assert!((h.ng - Vec3::Z).length() < 1e-6);
-    let err = InstancedScene::from_scenes(vec![scene], vec![Instance::new(0, glam::Affine3A::IDENTITY)]);
-    assert!(matches!(err, Err(Error::ShapesNotInstanced { object: 0 })), "{err:?}");
+    let squash = glam::Affine3A::from_scale(Vec3::new(1.0, 2.0, 1.0));
+    let err = InstancedScene::from_scenes(
+        vec![scene],
+        vec![Instance::new(0, glam::Affine3A::IDENTITY), Instance::new(0, squash)],
+    );
+    assert!(matches!(err, Err(Error::SphereInstanceNotSimilar { instance: 1 })), "{err:?}");
 }
 
 /// Criterion: a scene with spheres survives `to_bytes`/`from_bytes` with every answer equal.
@@ -320,5 +324,97 @@ fn spatial_queries_see_spheres() {
             assert_eq!(cp.geom_id, 1, "point {k}");
             assert!((cp.point - p).length() - cp.distance < 1e-4);
         }
+    }
+}
+
+/// Criterion: a two-level scene whose objects hold spheres (one with a mesh too), placed by
+/// rotations, mirrors, uniform scales and translations, answers every query shape as its
+/// flattened twin does (hits, normals in world space, instance ids mapped), and as brute force
+/// over the instances; all hits and closest points agree with the flattened twin.
+#[test]
+fn instanced_spheres_match_their_flattened_twin() {
+    use glam::{Affine3A, Quat};
+    use strahl::SpatialQuery;
+    let cfg = BuildConfig::default();
+    let flake = Scene::build_with_spheres(vec![], vec![flake(1)], &cfg).unwrap();
+    let mixed_obj = Scene::build_with_spheres(
+        vec![procedural::cuboid(Vec3::splat(-0.5), Vec3::splat(0.5))],
+        vec![SphereSet::new("ball", vec![Vec3::new(0.0, 1.0, 0.0)], vec![0.5]).unwrap()],
+        &cfg,
+    )
+    .unwrap();
+    let mut instances = Vec::new();
+    for i in 0..12 {
+        let a = i as f32 * 0.7;
+        let s = 0.5 + 0.15 * (i % 4) as f32;
+        let rot = Quat::from_euler(glam::EulerRot::XYZ, a, 0.3 * a, -a);
+        let mut m = Affine3A::from_scale_rotation_translation(
+            Vec3::splat(s),
+            rot,
+            Vec3::new((i % 4) as f32 * 3.0 - 4.5, (i / 4) as f32 * 2.5 - 2.5, -1.0),
+        );
+        if i % 5 == 0 {
+            m *= Affine3A::from_scale(Vec3::new(-1.0, 1.0, 1.0)); // a mirror
+        }
+        instances.push(Instance::new(i % 2, m));
+    }
+    let scene = InstancedScene::from_scenes(vec![flake, mixed_obj], instances.clone()).unwrap();
+    let flat = scene.flatten(&cfg).unwrap();
+    let rays = random_rays(3000, 21);
+    let cam = Camera::look_at(Vec3::new(0.0, 0.5, 9.0), Vec3::ZERO, Vec3::Y, 70.0);
+    let (primary, _) = raygen::primary(&cam, 48, 48);
+    for (rays, what) in [(&rays, "random"), (&primary, "primary")] {
+        let mut hits = 0;
+        let (mut hs, mut os) = (HitStream::default(), Vec::new());
+        scene.intersect_stream(rays, &mut hs, Coherence::Incoherent);
+        scene.occluded_stream(rays, &mut os, Coherence::Incoherent);
+        let (mut hc, mut oc) = (HitStream::default(), Vec::new());
+        scene.intersect_stream(rays, &mut hc, Coherence::Coherent);
+        scene.occluded_stream(rays, &mut oc, Coherence::Coherent);
+        for i in 0..rays.len() {
+            let r = rays.get(i);
+            let (a, f, b) = (scene.intersect(&r), flat.intersect(&r), scene.intersect_brute_force(&r));
+            assert_eq!(a.is_some(), f.is_some(), "{what} ray {i}: {a:?} against flattened {f:?}");
+            assert_eq!(a.map(|h| h.inst_id), b.map(|h| h.inst_id), "{what} ray {i} against brute force");
+            if let (Some(a), Some(f)) = (a, f) {
+                hits += 1;
+                assert!((a.t - f.t).abs() <= 1e-4 * f.t.max(1.0), "{what} ray {i}: t {} against {}", a.t, f.t);
+                assert!(
+                    a.ng.normalize().dot(f.ng.normalize()) > 0.999,
+                    "{what} ray {i}: {:?} against {:?}",
+                    a.ng,
+                    f.ng
+                );
+            }
+            assert_eq!(scene.occluded(&r), a.is_some(), "{what} occluded ray {i}");
+            assert_eq!(
+                hs.get(i).map(|h| (h.inst_id, h.prim_id)),
+                a.map(|h| (h.inst_id, h.prim_id)),
+                "{what} incoherent {i}"
+            );
+            assert_eq!(
+                hc.get(i).map(|h| (h.inst_id, h.prim_id)),
+                a.map(|h| (h.inst_id, h.prim_id)),
+                "{what} coherent {i}"
+            );
+            assert_eq!((os[i], oc[i]), (a.is_some(), a.is_some()), "{what} occlusion streams {i}");
+        }
+        assert!(hits > rays.len() / 10, "{what}: {hits} hits");
+    }
+    let (mut a, mut f) = (Vec::new(), Vec::new());
+    for i in 0..300 {
+        let r = rays.get(i);
+        scene.all_hits(&r, &mut a);
+        flat.all_hits(&r, &mut f);
+        assert_eq!(a.len(), f.len(), "all hits of ray {i}");
+        for (x, y) in a.iter().zip(&f) {
+            assert!((x.t - y.t).abs() <= 1e-4 * y.t.max(1.0), "all hits of ray {i}");
+        }
+    }
+    let mut rng = Pcg32::new(8, 8);
+    for k in 0..200 {
+        let p = Vec3::new(rng.next_f32() * 12.0 - 6.0, rng.next_f32() * 8.0 - 4.0, rng.next_f32() * 4.0 - 3.0);
+        let (a, f) = (scene.closest_point(p, f32::INFINITY).unwrap(), flat.closest_point(p, f32::INFINITY).unwrap());
+        assert!((a.distance - f.distance).abs() < 1e-4, "point {k}: {} against {}", a.distance, f.distance);
     }
 }

@@ -93,6 +93,9 @@ impl InstancedScene {
                 bvh.each_hit_with::<K, CONS>(&r, stack, &mut |h| {
                     f(&self.world_hit_of(k as u32, &bvh.hit_record(h)));
                 });
+                self.objects()[object as usize].sphere_tree().each_hit_on::<CONS>(&r, stack, &mut |h| {
+                    f(&self.world_sphere_hit_of(k as u32, h));
+                });
             }
             false
         });

@@ -72,7 +72,7 @@ impl Scene {
             inst_id: INVALID_ID,
         };
         closest_in(self.bvh(), &at, &mut best);
-        closest_sphere_in(self.sphere_tree(), p, &mut best);
+        closest_sphere_in(self.sphere_tree(), &at, &mut best);
         best.found
     }
 }
@@ -102,6 +102,7 @@ impl InstancedScene {
                     inst_id,
                 };
                 closest_in(self.objects()[object as usize].bvh(), &at, best);
+                closest_sphere_in(self.objects()[object as usize].sphere_tree(), &at, best);
             }
         });
         best.found
@@ -152,15 +153,16 @@ fn closest_in(bvh: &Bvh, at: &Placement<'_>, best: &mut Best) {
     });
 }
 
-/// The nearest sphere surface point of a flat scene's sphere tree to `p`, improving `best`: the
-/// centre's direction scaled to the radius, in float64 (`u = v = 0`, `ng` the outward normal
-/// times the radius; from the centre itself, the point above it in +y).
-fn closest_sphere_in(tree: &SphereBvh, p: Vec3, best: &mut Best) {
+/// The nearest sphere surface point of one sphere tree to the placement's query point, improving
+/// `best`: in object space the centre's direction scaled to the radius (from the centre itself,
+/// the point above it in +y), moved to the world, distances in float64. Exact in the world
+/// because instances of spheres are similarities. `u = v = 0`, `ng = point − centre` (world).
+fn closest_sphere_in(tree: &SphereBvh, at: &Placement<'_>, best: &mut Best) {
     if tree.is_empty() {
         return;
     }
-    let pw = p.as_dvec3();
-    walk_boxes(&tree.nodes, tree.root, p, 1.0, best, |leaf, best| {
+    let po = at.p_obj.as_dvec3();
+    walk_boxes(&tree.nodes, tree.root, at.p_obj, at.scale, best, |leaf, best| {
         let (start, count) = leaf_blocks(leaf);
         for b in &tree.blocks[start..start + count] {
             for lane in 0..b.prim.len() {
@@ -168,9 +170,14 @@ fn closest_sphere_in(tree: &SphereBvh, p: Vec3, best: &mut Best) {
                     continue;
                 }
                 let (c, r) = (b.center(lane).as_dvec3(), b.rows[3][lane] as f64);
-                let dir = (pw - c).try_normalize().unwrap_or(DVec3::Y);
-                let q = c + dir * r;
-                let d2 = (q - pw).length_squared();
+                let dir = (po - c).try_normalize().unwrap_or(DVec3::Y);
+                let (mut q, mut c_w) = (c + dir * r, c);
+                if let Some(m) = &at.to_world {
+                    let m = glam::DAffine3::from_cols_array(&m.to_cols_array().map(|x| x as f64));
+                    q = m.transform_point3(q);
+                    c_w = m.transform_point3(c);
+                }
+                let d2 = (q - at.p_world).length_squared();
                 if d2 < best.d2 || (best.found.is_none() && d2 <= best.d2) {
                     best.d2 = d2;
                     best.found = Some(ClosestPoint {
@@ -178,10 +185,10 @@ fn closest_sphere_in(tree: &SphereBvh, p: Vec3, best: &mut Best) {
                         distance: d2.sqrt() as f32,
                         u: 0.0,
                         v: 0.0,
-                        ng: (dir * r).as_vec3(),
+                        ng: (q - c_w).as_vec3(),
                         prim_id: b.prim[lane],
                         geom_id: b.geom[lane],
-                        inst_id: INVALID_ID,
+                        inst_id: at.inst_id,
                     });
                 }
             }

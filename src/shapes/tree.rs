@@ -214,6 +214,40 @@ impl SphereBvh {
         .map(|h| self.hit_record(&h, ray.origin, ray.dir))
     }
 
+    /// [`trace1`](Self::trace1) of a checked ray (valid, `tnear ≥ 0`) on `stack` above its
+    /// entries, the box test chosen by the caller: an instance's object walk.
+    pub(crate) fn trace1_on<const ANY: bool, const CONS: bool>(&self, ray: &Ray, stack: &mut Stack) -> Option<Hit> {
+        if self.is_empty() {
+            return None;
+        }
+        let terms = SlabTerms::of(ray);
+        let h = match self.test {
+            SphereTest::Geometric => self.trace1_from_terms::<ANY, GeometricK, CONS>(ray, terms, self.root, stack),
+            SphereTest::Algebraic => self.trace1_from_terms::<ANY, AlgebraicK, CONS>(ray, terms, self.root, stack),
+            SphereTest::Robust => self.trace1_from_terms::<ANY, RobustK, CONS>(ray, terms, self.root, stack),
+        };
+        h.map(|h| self.hit_record(&h, ray.origin, ray.dir))
+    }
+
+    /// [`trace_packet`](Self::trace_packet) on `stack` above its entries, the box test chosen by
+    /// the caller: an instance's object walk.
+    pub(crate) fn trace_packet_on<const ANY: bool, const CONS: bool>(
+        &self,
+        p: &RayPacket,
+        hit: &mut HitPacket,
+        stack: &mut Stack,
+    ) -> u32 {
+        let mut out = PacketHits::new(hit);
+        if !self.is_empty() {
+            match self.test {
+                SphereTest::Geometric => self.trace_packet_with::<ANY, GeometricK, CONS>(p, &mut out, stack),
+                SphereTest::Algebraic => self.trace_packet_with::<ANY, AlgebraicK, CONS>(p, &mut out, stack),
+                SphereTest::Robust => self.trace_packet_with::<ANY, RobustK, CONS>(p, &mut out, stack),
+            }
+        }
+        out.mask
+    }
+
     /// The walk of one checked ray over the subtree at `root`.
     #[inline(always)]
     fn trace1_from_terms<const ANY: bool, K: SphereKernel, const CONS: bool>(
@@ -379,35 +413,44 @@ impl SphereBvh {
             return;
         }
         let ray = ray.clamped_to_zero();
+        with_stack(|stack| match self.box_test {
+            BoxTest::Conservative => self.each_hit_on::<true>(&ray, stack, &mut f),
+            BoxTest::Fast => self.each_hit_on::<false>(&ray, stack, &mut f),
+        });
+    }
+
+    /// [`each_hit`](Self::each_hit) of a checked ray (valid, `tnear ≥ 0`) on `stack` above its
+    /// entries, the box test chosen by the caller.
+    pub(crate) fn each_hit_on<const CONS: bool>(&self, ray: &Ray, stack: &mut Stack, f: &mut impl FnMut(&Hit)) {
+        if self.is_empty() {
+            return;
+        }
         let rl = RayLanes::splat(ray.origin, ray.dir);
-        with_stack(|stack| {
-            dispatch_spheres!(self.test, self.box_test, |K, C| {
-                let base = stack.push_root(self.root);
-                let br = BoxRay::with_terms(SlabTerms::of(&ray), ray.tnear);
-                // The walk's `tfar` stays the ray's: every subtree the ray enters is visited.
-                let mut tfar = ray.tfar;
-                walk1::<false, C>(self.tree(), &br, stack, base, &mut tfar, |leaf, tfar, _| {
-                    let (start, count) = leaf_blocks(leaf);
-                    for bi in start..start + count {
-                        let b = &self.blocks[bi];
-                        let row = |k: usize| f32x4::new(b.rows[k]);
-                        let (t0, t1, meet) = sphere::roots(K::TEST, [row(0), row(1), row(2)], row(3), &rl);
-                        let (t0, t1) = (t0.to_array(), t1.to_array());
-                        let mut bits = meet.to_bitmask();
-                        while bits != 0 {
-                            let lane = bits.trailing_zeros() as usize;
-                            bits &= bits - 1;
-                            for t in [t0[lane], t1[lane]] {
-                                if t > ray.tnear && t <= *tfar {
-                                    let h = LeafHit { block: bi as u32, lane: lane as u32, t, u: 0.0, v: 0.0 };
-                                    f(&self.hit_record(&h, ray.origin, ray.dir));
-                                }
-                            }
+        let test = self.test;
+        let base = stack.push_root(self.root);
+        let br = BoxRay::with_terms(SlabTerms::of(ray), ray.tnear);
+        // The walk's `tfar` stays the ray's: every subtree the ray enters is visited.
+        let mut tfar = ray.tfar;
+        walk1::<false, CONS>(self.tree(), &br, stack, base, &mut tfar, |leaf, tfar, _| {
+            let (start, count) = leaf_blocks(leaf);
+            for bi in start..start + count {
+                let b = &self.blocks[bi];
+                let row = |k: usize| f32x4::new(b.rows[k]);
+                let (t0, t1, meet) = sphere::roots(test, [row(0), row(1), row(2)], row(3), &rl);
+                let (t0, t1) = (t0.to_array(), t1.to_array());
+                let mut bits = meet.to_bitmask();
+                while bits != 0 {
+                    let lane = bits.trailing_zeros() as usize;
+                    bits &= bits - 1;
+                    for t in [t0[lane], t1[lane]] {
+                        if t > ray.tnear && t <= *tfar {
+                            let h = LeafHit { block: bi as u32, lane: lane as u32, t, u: 0.0, v: 0.0 };
+                            f(&self.hit_record(&h, ray.origin, ray.dir));
                         }
                     }
-                    false
-                });
-            })
+                }
+            }
+            false
         });
     }
 
