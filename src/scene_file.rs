@@ -60,6 +60,8 @@ use crate::raygen::Pcg32;
 use crate::render::{
     FresnelMode, Light, LightKind, Material, Projection, RenderCamera, Settings, Surfaces, Texture, World,
 };
+use crate::scene::Scene;
+use crate::shapes::SphereSet;
 
 /// Largest scene file read, in bytes.
 pub const MAX_SCENE_FILE_BYTES: u64 = 64 << 20;
@@ -169,7 +171,21 @@ pub enum MeshSource {
         /// Extent along x and z.
         size: [f32; 2],
     },
+    /// An analytic sphere at the origin (`analytic = true`): one [`SphereSet`] of one sphere.
+    AnalyticSphere {
+        /// Radius.
+        radius: f32,
+    },
+    /// The analytic sphereflake (`analytic = true`): [`procedural::sphereflake_spheres`] as one
+    /// [`SphereSet`].
+    AnalyticSphereflake {
+        /// Recursion levels (at most [`MAX_ANALYTIC_FLAKE_LEVELS`]).
+        levels: u32,
+    },
 }
+
+/// Deepest analytic sphereflake a scene file may ask for: 4.8 million spheres.
+pub const MAX_ANALYTIC_FLAKE_LEVELS: u32 = 7;
 
 impl MeshSource {
     /// Loads or generates the meshes.
@@ -185,6 +201,18 @@ impl MeshSource {
             }
             MeshSource::Box { min, max } => vec![procedural::cuboid(min, max)],
             MeshSource::Quad { size } => vec![procedural::quad(size[0], size[1])],
+            MeshSource::AnalyticSphere { .. } | MeshSource::AnalyticSphereflake { .. } => Vec::new(),
+        })
+    }
+
+    /// The analytic spheres of this source (none for the triangle sources).
+    pub fn sphere_sets(&self) -> Result<Vec<SphereSet>> {
+        Ok(match *self {
+            MeshSource::AnalyticSphere { radius } => vec![SphereSet::new("sphere", vec![Vec3::ZERO], vec![radius])?],
+            MeshSource::AnalyticSphereflake { levels } => {
+                vec![SphereSet::from_pairs("sphereflake", &procedural::sphereflake_spheres(levels))?]
+            }
+            _ => Vec::new(),
         })
     }
 }
@@ -265,6 +293,21 @@ impl SceneFile {
             if m.mtl.is_some() && m.obj.is_none() {
                 return Err(err(format!("mesh `{name}`: `mtl` applies to `obj` meshes only")));
             }
+            let analytic = m.analytic == Some(true);
+            if analytic && m.sphere.is_none() && m.sphereflake.is_none() {
+                return Err(err(format!(
+                    "mesh `{name}`: `analytic` applies to `sphere` and `sphereflake` meshes only"
+                )));
+            }
+            // Tessellation sizes: required for triangle spheres, meaningless for analytic ones.
+            let tessellation = |stacks: Option<u32>, slices: Option<u32>| match (analytic, stacks, slices) {
+                (false, Some(a), Some(b)) => Ok((a, b)),
+                (false, _, _) => Err(err(format!("mesh `{name}` needs `stacks` and `slices` (or `analytic = true`)"))),
+                (true, None, None) => Ok((0, 0)),
+                (true, _, _) => {
+                    Err(err(format!("mesh `{name}`: `stacks` and `slices` do not apply to analytic spheres")))
+                }
+            };
             let source = if let Some(p) = &m.obj {
                 if m.mtl == Some(true) {
                     MeshSource::ObjWithMaterials(base.join(p))
@@ -272,13 +315,24 @@ impl SceneFile {
                     MeshSource::Obj(base.join(p))
                 }
             } else if let Some(s) = &m.sphereflake {
-                // 1 + 9 + … + 9^levels spheres.
-                let spheres = (9f64.powi(s.levels.min(1000) as i32 + 1) - 1.0) / 8.0;
-                let tris = spheres * sphere_triangles(s.stacks, s.slices) as f64;
-                if tris > MAX_GENERATED_TRIANGLES as f64 {
-                    return Err(too_many(tris));
+                let (stacks, slices) = tessellation(s.stacks, s.slices)?;
+                if analytic {
+                    if s.levels > MAX_ANALYTIC_FLAKE_LEVELS {
+                        return Err(err(format!(
+                            "mesh `{name}`: analytic sphereflake levels {}; at most {MAX_ANALYTIC_FLAKE_LEVELS}",
+                            s.levels
+                        )));
+                    }
+                    MeshSource::AnalyticSphereflake { levels: s.levels }
+                } else {
+                    // 1 + 9 + … + 9^levels spheres.
+                    let spheres = (9f64.powi(s.levels.min(1000) as i32 + 1) - 1.0) / 8.0;
+                    let tris = spheres * sphere_triangles(stacks, slices) as f64;
+                    if tris > MAX_GENERATED_TRIANGLES as f64 {
+                        return Err(too_many(tris));
+                    }
+                    MeshSource::Sphereflake { levels: s.levels, stacks, slices }
                 }
-                MeshSource::Sphereflake { levels: s.levels, stacks: s.stacks, slices: s.slices }
             } else if let Some(b) = &m.cuboid {
                 let (min, max) = (Vec3::from(b.min), Vec3::from(b.max));
                 let lim = crate::MAX_COORDINATE;
@@ -304,11 +358,16 @@ impl SceneFile {
                         0.5 * crate::MAX_COORDINATE
                     )));
                 }
-                let tris = sphere_triangles(s.stacks, s.slices);
-                if tris > MAX_GENERATED_TRIANGLES {
-                    return Err(too_many(tris as f64));
+                let (stacks, slices) = tessellation(s.stacks, s.slices)?;
+                if analytic {
+                    MeshSource::AnalyticSphere { radius: s.radius }
+                } else {
+                    let tris = sphere_triangles(stacks, slices);
+                    if tris > MAX_GENERATED_TRIANGLES {
+                        return Err(too_many(tris as f64));
+                    }
+                    MeshSource::Sphere { radius: s.radius, stacks, slices }
                 }
-                MeshSource::Sphere { radius: s.radius, stacks: s.stacks, slices: s.slices }
             };
             let smooth =
                 m.smooth.unwrap_or(matches!(source, MeshSource::Sphere { .. } | MeshSource::Sphereflake { .. }));
@@ -501,9 +560,32 @@ impl SceneFile {
         self.meshes.iter().map(|(_, s)| s.load()).collect()
     }
 
-    /// Loads the meshes and builds the two-level scene.
+    /// The analytic spheres of every object (one list per `[mesh.*]` table, in name order; empty
+    /// for triangle sources).
+    pub fn load_spheres(&self) -> Result<Vec<Vec<SphereSet>>> {
+        self.meshes.iter().map(|(_, s)| s.sphere_sets()).collect()
+    }
+
+    /// Loads the meshes and spheres and builds the two-level scene.
     pub fn build(&self, config: &BuildConfig) -> Result<InstancedScene> {
-        InstancedScene::build(self.load_objects()?, self.instances.clone(), config)
+        self.build_from(self.load_objects()?, config)
+    }
+
+    /// Builds the two-level scene from the meshes [`load_objects`](Self::load_objects) returned
+    /// and this file's analytic spheres: each object's meshes and spheres in one object scene
+    /// (geometry ids: meshes, then sphere sets), objects in parallel.
+    pub fn build_from(&self, objects: Vec<Vec<TriangleMesh>>, config: &BuildConfig) -> Result<InstancedScene> {
+        use rayon::prelude::*;
+        let spheres = self.load_spheres()?;
+        if spheres.iter().all(|s| s.is_empty()) {
+            return InstancedScene::build(objects, self.instances.clone(), config);
+        }
+        let scenes = objects
+            .into_par_iter()
+            .zip(spheres)
+            .map(|(meshes, sets)| Scene::build_with_spheres(meshes, sets, config))
+            .collect::<Result<Vec<Scene>>>()?;
+        InstancedScene::from_scenes(scenes, self.instances.clone())
     }
 
     /// The renderer's view of the scene, from the objects [`load_objects`](Self::load_objects)
@@ -573,6 +655,11 @@ impl SceneFile {
             .collect();
         let placed: Vec<_> = self.instances.iter().copied().zip(self.instance_materials.iter().copied()).collect();
         let mut surfaces = Surfaces::new(&objs, &placed);
+        for (o, ((_, source), sh)) in self.meshes.iter().zip(&self.mesh_shading).enumerate() {
+            for set in source.sphere_sets()? {
+                surfaces.add_spheres(o, set.len(), sh.material);
+            }
+        }
         for (o, geoms) in per_geom.into_iter().enumerate() {
             for (g, (_, uvs)) in geoms.into_iter().enumerate() {
                 if let Some(uvs) = uvs {
@@ -846,6 +933,7 @@ struct RawMesh {
     #[serde(default)]
     groups: BTreeMap<String, String>,
     mtl: Option<bool>,
+    analytic: Option<bool>,
 }
 
 #[derive(Deserialize)]
@@ -865,16 +953,16 @@ struct RawQuad {
 #[serde(deny_unknown_fields)]
 struct RawFlake {
     levels: u32,
-    stacks: u32,
-    slices: u32,
+    stacks: Option<u32>,
+    slices: Option<u32>,
 }
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawSphere {
     radius: f32,
-    stacks: u32,
-    slices: u32,
+    stacks: Option<u32>,
+    slices: Option<u32>,
 }
 
 #[derive(Clone, Copy, Deserialize)]

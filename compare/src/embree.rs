@@ -232,6 +232,18 @@ unsafe impl Sync for Scene {}
 impl Scene {
     /// Builds `meshes` with the given quality; `robust` sets `RTC_SCENE_FLAG_ROBUST`.
     pub fn build(device: &Device, meshes: &[TriangleMesh], quality: Quality, robust: bool) -> anyhow::Result<Self> {
+        Self::build_mixed(device, meshes, &[], quality, robust)
+    }
+
+    /// Builds `meshes` and then sphere sets (`RTC_GEOMETRY_TYPE_SPHERE_POINT`, geometry ids after
+    /// the meshes', as strahl numbers them) into one scene.
+    pub fn build_mixed(
+        device: &Device,
+        meshes: &[TriangleMesh],
+        spheres: &[strahl::SphereSet],
+        quality: Quality,
+        robust: bool,
+    ) -> anyhow::Result<Self> {
         // SAFETY: `device.raw` is live; every pointer returned by rtcSetNewGeometryBuffer is checked
         // for null and points to a buffer of exactly `item_count × byte_stride` bytes (plus Embree's
         // own padding), which the copies below fill without overrunning.
@@ -276,6 +288,7 @@ impl Scene {
                 rtcAttachGeometryByID(raw, g, id as c_uint);
                 rtcReleaseGeometry(g);
             }
+            attach_spheres(device, raw, spheres, meshes.len())?;
             let start = Instant::now();
             rtcCommitScene(raw);
             scene.build_ms = start.elapsed().as_secs_f64() * 1e3;
@@ -288,46 +301,7 @@ impl Scene {
     /// index), each from one `RTC_FORMAT_FLOAT4` vertex buffer of `(x, y, z, radius)`: Embree's
     /// own layout for spheres, filled before the build and never touched by a timed query.
     pub fn build_spheres(device: &Device, sets: &[strahl::SphereSet], quality: Quality) -> anyhow::Result<Self> {
-        // SAFETY: `device.raw` is live; each buffer pointer is checked for null and points to
-        // `n × 16` bytes (plus Embree's padding), which the copy below fills without overrunning.
-        unsafe {
-            let raw = rtcNewScene(device.raw);
-            if raw.is_null() {
-                device.check("rtcNewScene")?;
-                anyhow::bail!("rtcNewScene failed");
-            }
-            let mut scene = Self { raw, build_ms: 0.0, objects: Vec::new() };
-            rtcSetSceneBuildQuality(raw, quality as c_uint);
-            for (id, set) in sets.iter().enumerate() {
-                if set.is_empty() {
-                    continue;
-                }
-                let g = rtcNewGeometry(device.raw, RTC_GEOMETRY_TYPE_SPHERE_POINT);
-                if g.is_null() {
-                    device.check("rtcNewGeometry")?;
-                    anyhow::bail!("rtcNewGeometry(SPHERE_POINT) failed");
-                }
-                let n = set.len();
-                let vb = rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT4, 16, n) as *mut f32;
-                if vb.is_null() {
-                    rtcReleaseGeometry(g);
-                    device.check("rtcSetNewGeometryBuffer")?;
-                    anyhow::bail!("rtcSetNewGeometryBuffer failed");
-                }
-                let vs = std::slice::from_raw_parts_mut(vb, 4 * n);
-                for (i, (c, &r)) in set.centers().iter().zip(set.radii()).enumerate() {
-                    vs[4 * i..4 * i + 4].copy_from_slice(&[c.x, c.y, c.z, r]);
-                }
-                rtcCommitGeometry(g);
-                rtcAttachGeometryByID(raw, g, id as c_uint);
-                rtcReleaseGeometry(g);
-            }
-            let start = Instant::now();
-            rtcCommitScene(raw);
-            scene.build_ms = start.elapsed().as_secs_f64() * 1e3;
-            device.check("rtcCommitScene")?;
-            Ok(scene)
-        }
+        Self::build_mixed(device, &[], sets, quality, false)
     }
 
     /// Builds each object (a list of meshes) as its own scene, then a scene of instances of them:
@@ -339,8 +313,23 @@ impl Scene {
         instances: &[(usize, [f32; 12])],
         quality: Quality,
     ) -> anyhow::Result<Self> {
-        let objects =
-            objects.iter().map(|m| Self::build(device, m, quality, false)).collect::<anyhow::Result<Vec<_>>>()?;
+        Self::build_instanced_mixed(device, objects, &[], instances, quality)
+    }
+
+    /// [`build_instanced`](Self::build_instanced) with each object's sphere sets after its meshes
+    /// (`spheres[o]`; a missing entry is no spheres).
+    pub fn build_instanced_mixed(
+        device: &Device,
+        objects: &[Vec<TriangleMesh>],
+        spheres: &[Vec<strahl::SphereSet>],
+        instances: &[(usize, [f32; 12])],
+        quality: Quality,
+    ) -> anyhow::Result<Self> {
+        let objects = objects
+            .iter()
+            .enumerate()
+            .map(|(o, m)| Self::build_mixed(device, m, spheres.get(o).map_or(&[][..], |s| s), quality, false))
+            .collect::<anyhow::Result<Vec<_>>>()?;
         if let Some((i, (o, _))) = instances.iter().enumerate().find(|(_, (o, _))| *o >= objects.len()) {
             anyhow::bail!("instance {i} places object {o} of {}", objects.len());
         }
@@ -428,6 +417,42 @@ impl Scene {
         // SAFETY: as for intersect1m.
         unsafe { rtcOccluded1M(self.raw, &mut ctx, rays.as_mut_ptr(), rays.len() as c_uint, size_of::<RTCRay>()) }
     }
+}
+
+/// Attaches each sphere set as an `RTC_GEOMETRY_TYPE_SPHERE_POINT` geometry of `raw` with id
+/// `first_id + index`, from one `RTC_FORMAT_FLOAT4` vertex buffer of `(x, y, z, radius)`:
+/// Embree's own layout for spheres, filled before the build.
+fn attach_spheres(device: &Device, raw: RTCScene, sets: &[strahl::SphereSet], first_id: usize) -> anyhow::Result<()> {
+    // SAFETY: `device.raw` and `raw` are live (the caller's); each buffer pointer is checked for
+    // null and points to `n × 16` bytes (plus Embree's padding), which the copy below fills
+    // without overrunning.
+    unsafe {
+        for (k, set) in sets.iter().enumerate() {
+            if set.is_empty() {
+                continue;
+            }
+            let g = rtcNewGeometry(device.raw, RTC_GEOMETRY_TYPE_SPHERE_POINT);
+            if g.is_null() {
+                device.check("rtcNewGeometry")?;
+                anyhow::bail!("rtcNewGeometry(SPHERE_POINT) failed");
+            }
+            let n = set.len();
+            let vb = rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT4, 16, n) as *mut f32;
+            if vb.is_null() {
+                rtcReleaseGeometry(g);
+                device.check("rtcSetNewGeometryBuffer")?;
+                anyhow::bail!("rtcSetNewGeometryBuffer failed");
+            }
+            let vs = std::slice::from_raw_parts_mut(vb, 4 * n);
+            for (i, (c, &r)) in set.centers().iter().zip(set.radii()).enumerate() {
+                vs[4 * i..4 * i + 4].copy_from_slice(&[c.x, c.y, c.z, r]);
+            }
+            rtcCommitGeometry(g);
+            rtcAttachGeometryByID(raw, g, (first_id + k) as c_uint);
+            rtcReleaseGeometry(g);
+        }
+    }
+    Ok(())
 }
 
 impl Drop for Scene {

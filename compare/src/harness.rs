@@ -615,6 +615,13 @@ fn run_instanced(
     settings: &Settings,
     mut progress: impl FnMut(&str),
 ) -> anyhow::Result<SceneResult> {
+    if file.load_spheres()?.iter().any(|s| !s.is_empty()) {
+        anyhow::bail!(
+            "{}: analytic spheres are compared by `compare --spheres` (against Embree's SPHERE_POINT) and \
+             rendered by `compare --render`; the scene-file harness compares triangle scenes",
+            file.path.display()
+        );
+    }
     let objects = file.load_objects()?;
     progress("building");
     let cfg = BuildConfig::default();

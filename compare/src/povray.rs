@@ -8,7 +8,8 @@
 //!   panorama (equirectangular) → `spherical angle 360 180`; orthographic → `orthographic` with
 //!   `right`/`up` spanning the window;
 //! - meshes → `mesh2` (with `normal_vectors` where strahl shades smooth), one object per instance
-//!   and geometry with its `matrix` and texture;
+//!   and geometry with its `matrix` and texture; analytic sphere sets → a `union` of `sphere`s
+//!   per set, placed the same way;
 //! - material: `pigment rgb diffuse`, `finish { ambient a·1 diffuse 1 phong ks phong_size n
 //!   reflection r }`; transparent: `pigment rgbf <transmit, 1>` with `interior { ior }` and, with
 //!   Fresnel on, `reflection { 0, 1 fresnel on } conserve_energy`; absorption α →
@@ -191,6 +192,18 @@ pub fn export(file: &SceneFile, objects: &[Vec<TriangleMesh>], settings: &Settin
             }
         }
     }
+    // Analytic spheres as POV-Ray's own `sphere`s, one union per set (POV-Ray bounds the
+    // union's members itself).
+    let spheres = file.load_spheres()?;
+    for (o, sets) in spheres.iter().enumerate() {
+        for (k, set) in sets.iter().enumerate() {
+            writeln!(s, "#declare S{o}_{k} = union {{")?;
+            for (c, r) in set.centers().iter().zip(set.radii()) {
+                writeln!(s, "  sphere {{ <{}, {}, {}>, {} }}", c.x, c.y, c.z, r)?;
+            }
+            writeln!(s, "}}")?;
+        }
+    }
     for (i, inst) in file.instances.iter().enumerate() {
         let sh = &file.mesh_shading[inst.object];
         let m = h * inst.transform;
@@ -205,6 +218,11 @@ pub fn export(file: &SceneFile, objects: &[Vec<TriangleMesh>], settings: &Settin
                 .unwrap_or(sh.material);
             let material = &file.materials[mat as usize].1;
             writeln!(s, "object {{ M{}_{g} {} {matrix} }}", inst.object, material_sdl(material))?;
+        }
+        for k in 0..spheres[inst.object].len() {
+            let mat = file.instance_materials[i].unwrap_or(sh.material);
+            let material = &file.materials[mat as usize].1;
+            writeln!(s, "object {{ S{}_{k} {} {matrix} }}", inst.object, material_sdl(material))?;
         }
     }
     Ok(s)

@@ -34,6 +34,9 @@ pub struct EmbreeBackend {
     /// Per instance: Embree 3 reports instance hits' normals in object space; strahl's in world
     /// space by the cofactor matrix `det(M)·M⁻ᵀ` (which flips with a mirroring transform's winding).
     cofactor: Vec<Mat3>,
+    /// Per instance: its object's mesh count (geometry ids from it on are sphere sets, whose
+    /// normals strahl keeps outward under mirrors) and whether the transform mirrors.
+    sphere_from: Vec<(u32, bool)>,
     /// Streams through `rtcIntersect16`/`rtcOccluded16` instead of the `1M` calls.
     packets: AtomicBool,
     _device: Device,
@@ -95,11 +98,28 @@ fn cofactor(m: &Affine3A) -> Mat3 {
 impl EmbreeBackend {
     /// Builds `objects` placed by `instances` with Embree's default (medium) quality.
     pub fn build(objects: &[Vec<TriangleMesh>], instances: &[Instance]) -> anyhow::Result<Self> {
+        Self::build_mixed(objects, &[], instances)
+    }
+
+    /// [`build`](Self::build) with each object's analytic spheres after its meshes, as Embree's
+    /// `RTC_GEOMETRY_TYPE_SPHERE_POINT` geometries.
+    pub fn build_mixed(
+        objects: &[Vec<TriangleMesh>],
+        spheres: &[Vec<strahl::SphereSet>],
+        instances: &[Instance],
+    ) -> anyhow::Result<Self> {
         let device = Device::new("threads=2")?;
         let xfms: Vec<(usize, [f32; 12])> = instances.iter().map(|i| (i.object, column_major(&i.transform))).collect();
-        let scene = embree::Scene::build_instanced(&device, objects, &xfms, embree::Quality::Medium)?;
+        let scene = embree::Scene::build_instanced_mixed(&device, objects, spheres, &xfms, embree::Quality::Medium)?;
         let cofactor = instances.iter().map(|i| cofactor(&i.transform)).collect();
-        Ok(Self { scene, cofactor, packets: AtomicBool::new(false), _device: device })
+        let sphere_from = instances
+            .iter()
+            .map(|i| {
+                let meshes = objects.get(i.object).map_or(0, |o| o.len()) as u32;
+                (meshes, i.transform.matrix3.determinant() < 0.0)
+            })
+            .collect();
+        Ok(Self { scene, cofactor, sphere_from, packets: AtomicBool::new(false), _device: device })
     }
 
     /// Answers streams through `rtcIntersect16`/`rtcOccluded16` on runs of 16 consecutive rays
@@ -116,7 +136,11 @@ impl EmbreeBackend {
         let inst = h.instID[0];
         let ng = Vec3::new(h.Ng_x, h.Ng_y, h.Ng_z);
         let ng = match self.cofactor.get(inst as usize) {
-            Some(c) => *c * ng,
+            Some(c) => match self.sphere_from.get(inst as usize) {
+                // A sphere's normal stays outward under a mirror, as strahl's.
+                Some(&(first, true)) if h.geomID >= first => -(*c * ng),
+                _ => *c * ng,
+            },
             None => ng,
         };
         let inst_id = if inst == RTC_INVALID_GEOMETRY_ID { INVALID_ID } else { inst };
@@ -329,10 +353,10 @@ pub fn compare_scene(
             n as u64 * file.instances.iter().filter(|i| i.object == k).count() as u64
         })
         .sum();
+    let spheres = file.load_spheres()?;
     let (scene, backend) = pool.install(|| -> anyhow::Result<_> {
-        let scene =
-            strahl::InstancedScene::build(objects.clone(), file.instances.clone(), &strahl::BuildConfig::default())?;
-        Ok((scene, EmbreeBackend::build(&objects, &file.instances)?))
+        let scene = file.build_from(objects.clone(), &strahl::BuildConfig::default())?;
+        Ok((scene, EmbreeBackend::build_mixed(&objects, &spheres, &file.instances)?))
     })?;
     let ours = Renderer { query: &scene, world: &world, camera, settings };
     let theirs = Renderer { query: &backend, world: &world, camera, settings };
@@ -376,7 +400,7 @@ pub fn compare_scene(
             let f = strahl::SceneFile::read(path)?;
             let objs = f.load_objects()?;
             let w = f.world(&objs)?;
-            let sc = strahl::InstancedScene::build(objs, f.instances.clone(), &strahl::BuildConfig::default())?;
+            let sc = f.build_from(objs, &strahl::BuildConfig::default())?;
             let r = Renderer { query: &sc, world: &w, camera, settings };
             r.render(&none)?.0.write(&out.join(format!("{name}_strahl.png")))?;
             Ok(())

@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use compare::render::EmbreeBackend;
 use strahl::render::{Renderer, Settings};
-use strahl::{BuildConfig, InstancedScene, SceneFile};
+use strahl::{BuildConfig, SceneFile};
 
 fn scene(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../data").join(format!("{name}.toml"))
@@ -18,12 +18,14 @@ fn small(file: &SceneFile) -> Settings {
 
 #[test]
 fn embree_backend_renders_the_same_image() {
-    for name in ["whitted", "cornell", "beer"] {
+    // Analytic spheres (strahl's robust test against Embree's SPHERE_POINT) differ in the last
+    // bits, which grazing and mirrored rays carry to a few pixels: 0.22% at full size.
+    for (name, per_mille) in [("whitted", 1), ("cornell", 1), ("beer", 1), ("spheres", 10)] {
         let file = SceneFile::read(scene(name)).unwrap();
         let objects = file.load_objects().unwrap();
         let world = file.world(&objects).unwrap();
-        let ours = InstancedScene::build(objects.clone(), file.instances.clone(), &BuildConfig::default()).unwrap();
-        let theirs = EmbreeBackend::build(&objects, &file.instances).unwrap();
+        let ours = file.build_from(objects.clone(), &BuildConfig::default()).unwrap();
+        let theirs = EmbreeBackend::build_mixed(&objects, &file.load_spheres().unwrap(), &file.instances).unwrap();
         let camera = file.camera.unwrap().render_camera().unwrap();
         let settings = small(&file);
         let (a, sa) = Renderer { query: &ours, world: &world, camera, settings }.render(&|_| {}).unwrap();
@@ -40,9 +42,10 @@ fn embree_backend_renders_the_same_image() {
                 .filter(|(p, q)| p.iter().zip(*q).any(|(x, y)| x.abs_diff(*y) > 1))
                 .count();
             let what = format!("{name} (Embree packets: {packets})");
-            assert!(differing * 1000 <= a.pixels.len(), "{what}: {differing} of {} pixels differ", a.pixels.len());
+            let n = a.pixels.len();
+            assert!(differing * 1000 <= per_mille * n, "{what}: {differing} of {n} pixels differ");
             let (ta, tb) = (sa.total_rays() as f64, sb.total_rays() as f64);
-            assert!((ta - tb).abs() <= 1e-3 * ta, "{what}: {ta} vs {tb} rays");
+            assert!((ta - tb).abs() <= 1e-3 * per_mille as f64 * ta, "{what}: {ta} vs {tb} rays");
         }
     }
 }
@@ -56,10 +59,12 @@ fn povray_renders_a_close_image() {
     let dir = std::env::temp_dir().join(format!("strahl-povray-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     // Bounds measured at a quarter of the scenes' size (PSNR, then the share of pixels within
-    // 8/255): whitted 21.7 dB / 84%, cornell (area light) about 24 / 90%, beer 20.3 / 79%. The
+    // 8/255): whitted 21.7 dB / 84%, cornell (area light) about 24 / 90%, beer 20.3 / 79%, the
+    // analytic spheres (POV-Ray's own `sphere`s) 29.5 / 96%. The
     // remaining differences are POV-Ray's filtered shadows under glass, its area-light grid
     // (edges included) against strahl's strata, and highlights.
-    let mut scenes = vec![("whitted", 19.0, 0.75), ("cornell", 20.0, 0.85), ("beer", 18.0, 0.7)];
+    let mut scenes =
+        vec![("whitted", 19.0, 0.75), ("cornell", 20.0, 0.85), ("beer", 18.0, 0.7), ("spheres", 26.0, 0.93)];
     // The fisheye, omnimax and panorama views of the shared Sibenik (when present) pin the
     // cameras' mappings against POV-Ray's: measured 46, 47 and 48 dB, every pixel within 8/255.
     if Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/scenes/sibenik/sibenik.obj").exists() {
@@ -76,7 +81,7 @@ fn povray_renders_a_close_image() {
         let file = SceneFile::read(scene(name)).unwrap();
         let objects = file.load_objects().unwrap();
         let world = file.world(&objects).unwrap();
-        let ours = InstancedScene::build(objects.clone(), file.instances.clone(), &BuildConfig::default()).unwrap();
+        let ours = file.build_from(objects.clone(), &BuildConfig::default()).unwrap();
         let camera = file.camera.unwrap().render_camera().unwrap();
         let settings = small(&file);
         let (img, _) = Renderer { query: &ours, world: &world, camera, settings }.render(&|_| {}).unwrap();

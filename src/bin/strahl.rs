@@ -7,7 +7,7 @@ use clap::{Parser, Subcommand, ValueEnum};
 use glam::Vec3;
 use indicatif::{ProgressBar, ProgressStyle};
 use strahl::render::{Projection, RayKind, RenderCamera, Renderer};
-use strahl::{BuildConfig, InstancedScene, SceneFile};
+use strahl::{BuildConfig, SceneFile};
 
 #[derive(Parser)]
 #[command(version, about = "strahl: a data-oriented packet/SIMD ray tracer")]
@@ -125,7 +125,7 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
     let (scene, world) = pool.install(|| -> anyhow::Result<_> {
         let objects = file.load_objects()?;
         let world = file.world(&objects)?;
-        let scene = InstancedScene::build(objects, file.instances.clone(), &BuildConfig::default())?;
+        let scene = file.build_from(objects, &BuildConfig::default())?;
         Ok((scene, world))
     })?;
     let build_s = t0.elapsed().as_secs_f64();

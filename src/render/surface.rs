@@ -19,6 +19,8 @@ struct Geometry {
     /// Texture coordinates of each triangle's corners.
     uvs: Option<Vec<[Vec2; 3]>>,
     material: u32,
+    /// For an analytic sphere set (no triangles): its number of spheres.
+    spheres: usize,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -85,6 +87,7 @@ impl Surfaces {
                         normals: smooth.then(|| vertex_normals(m)),
                         uvs: None,
                         material,
+                        spheres: 0,
                     })
                     .collect()
             })
@@ -99,6 +102,22 @@ impl Surfaces {
             })
             .collect();
         Self { objects, placements }
+    }
+
+    /// Appends an analytic sphere set of `count` spheres with `material` as the next geometry of
+    /// object `object` (after its meshes, as scenes number them); `false` if there is no such
+    /// object.
+    pub fn add_spheres(&mut self, object: usize, count: usize, material: u32) -> bool {
+        let Some(o) = self.objects.get_mut(object) else { return false };
+        o.push(Geometry {
+            positions: Vec::new(),
+            indices: Vec::new(),
+            normals: None,
+            uvs: None,
+            material,
+            spheres: count,
+        });
+        true
     }
 
     /// Gives geometry `geom` of object `object` texture coordinates per triangle corner; `false`
@@ -129,6 +148,19 @@ impl Surfaces {
             (p.object as usize, Some(p))
         };
         let g = self.objects.get(object)?.get(hit.geom_id as usize)?;
+        if g.spheres > 0 {
+            // A sphere: the point along the ray, the query's outward normal (already in world
+            // space) for both normals, no texture coordinates.
+            if hit.prim_id as usize >= g.spheres {
+                return None;
+            }
+            let mut ng = hit.ng.normalize_or_zero();
+            if ng == Vec3::ZERO || !ng.is_finite() {
+                ng = -ray.dir.normalize_or_zero();
+            }
+            let material = placement.and_then(|p| p.material).unwrap_or(g.material);
+            return Some(SurfacePoint { p: ray.at(hit.t), ng, ns: ng, uv: None, material });
+        }
         let tri = g.indices.get(hit.prim_id as usize)?;
         let [a, b, c] = tri.map(|i| i as usize);
         let w = 1.0 - hit.u - hit.v;
