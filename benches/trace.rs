@@ -2,7 +2,8 @@
 //! single, packet and stream APIs on one thread; shadow rays also through the octant groups that
 //! occlusion streams of trees out of the cache take (`groups`). `Throughput::Elements` makes criterion print rays/s.
 //!
-//! Scenes: a generated sphereflake (always), the instanced forest of `data/forest.toml` (always),
+//! Scenes: a generated sphereflake (always), its analytic twin of 820 spheres (always), the
+//! instanced forest of `data/forest.toml` (always),
 //! and the shared bunny and Sponza when `../shared/scenes` is present. Ray sets are built once per
 //! scene with fixed seeds.
 
@@ -114,6 +115,11 @@ fn bench_rays(c: &mut Criterion) {
         let cam = Camera::look_at(case.eye, case.at, Vec3::Y, 60.0);
         bench_scene(c, case.name, &scene, scene.bounds(), &cam, case.light);
     }
+    // The same sphereflake's shape as analytic spheres (issue 30): level 3, 820 spheres.
+    let flake = strahl::SphereSet::from_pairs("flake", &procedural::sphereflake_spheres(3)).unwrap();
+    let scene = Scene::build_with_spheres(vec![], vec![flake], &BuildConfig::default()).unwrap();
+    let cam = Camera::look_at(Vec3::new(2.1, 1.3, 2.1), Vec3::new(0.0, 0.1, 0.0), Vec3::Y, 60.0);
+    bench_scene(c, "sphereflake_analytic", &scene, scene.bounds(), &cam, Vec3::new(-3.0, 6.0, 4.0));
     // Instanced: 762 instances, 13.5 million placed triangles.
     let file = strahl::SceneFile::read(Path::new(env!("CARGO_MANIFEST_DIR")).join("data/forest.toml")).unwrap();
     let scene = file.build(&BuildConfig::default()).unwrap();
