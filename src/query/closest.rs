@@ -41,6 +41,28 @@ struct Best {
     found: Option<ClosestPoint>,
 }
 
+impl Best {
+    /// Takes the surface point `q` (squared distance `d2`) if it is nearer than the best so far,
+    /// or the first within the bound; `record` fills in the rest of its record.
+    #[inline]
+    fn offer(&mut self, q: DVec3, d2: f64, record: impl FnOnce(ClosestPoint) -> ClosestPoint) {
+        if d2 < self.d2 || (self.found.is_none() && d2 <= self.d2) {
+            self.d2 = d2;
+            let base = ClosestPoint {
+                point: q.as_vec3(),
+                distance: d2.sqrt() as f32,
+                u: 0.0,
+                v: 0.0,
+                ng: Vec3::ZERO,
+                prim_id: INVALID_ID,
+                geom_id: INVALID_ID,
+                inst_id: INVALID_ID,
+            };
+            self.found = Some(record(base));
+        }
+    }
+}
+
 /// Where an object sits: its meshes, the query point in object space, the world query point, and
 /// how the object maps to the world.
 struct Placement<'a> {
@@ -135,19 +157,15 @@ fn closest_in(bvh: &Bvh, at: &Placement<'_>, best: &mut Best) {
                 let [a, bb, c] = tri.map(|v| v.as_dvec3());
                 let (q, u, v) = closest_on_triangle(at.p_world, a, bb, c);
                 let d2 = (q - at.p_world).length_squared();
-                if d2 < best.d2 || (best.found.is_none() && d2 <= best.d2) {
-                    best.d2 = d2;
-                    best.found = Some(ClosestPoint {
-                        point: q.as_vec3(),
-                        distance: d2.sqrt() as f32,
-                        u: u as f32,
-                        v: v as f32,
-                        ng: (tri[1] - tri[0]).cross(tri[2] - tri[0]),
-                        prim_id: prim,
-                        geom_id: geom,
-                        inst_id: at.inst_id,
-                    });
-                }
+                best.offer(q, d2, |cp| ClosestPoint {
+                    u: u as f32,
+                    v: v as f32,
+                    ng: (tri[1] - tri[0]).cross(tri[2] - tri[0]),
+                    prim_id: prim,
+                    geom_id: geom,
+                    inst_id: at.inst_id,
+                    ..cp
+                });
             }
         }
     });
@@ -178,19 +196,13 @@ fn closest_sphere_in(tree: &SphereBvh, at: &Placement<'_>, best: &mut Best) {
                     c_w = m.transform_point3(c);
                 }
                 let d2 = (q - at.p_world).length_squared();
-                if d2 < best.d2 || (best.found.is_none() && d2 <= best.d2) {
-                    best.d2 = d2;
-                    best.found = Some(ClosestPoint {
-                        point: q.as_vec3(),
-                        distance: d2.sqrt() as f32,
-                        u: 0.0,
-                        v: 0.0,
-                        ng: (q - c_w).as_vec3(),
-                        prim_id: b.prim[lane],
-                        geom_id: b.geom[lane],
-                        inst_id: at.inst_id,
-                    });
-                }
+                best.offer(q, d2, |cp| ClosestPoint {
+                    ng: (q - c_w).as_vec3(),
+                    prim_id: b.prim[lane],
+                    geom_id: b.geom[lane],
+                    inst_id: at.inst_id,
+                    ..cp
+                });
             }
         }
     });
