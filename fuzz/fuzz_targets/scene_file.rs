@@ -7,7 +7,7 @@
 use libfuzzer_sys::fuzz_target;
 use strahl::render::{Renderer, Settings};
 use strahl::scene_file::MeshSource;
-use strahl::{BuildConfig, InstancedScene, Query, SceneFile};
+use strahl::{BuildConfig, Query, SceneFile};
 
 fuzz_target!(|data: &[u8]| {
     let Ok(text) = std::str::from_utf8(data) else { return };
@@ -18,6 +18,8 @@ fuzz_target!(|data: &[u8]| {
             MeshSource::Obj(_) | MeshSource::ObjWithMaterials(_) | MeshSource::Box { .. } | MeshSource::Quad { .. } => true,
             MeshSource::Sphereflake { levels, stacks, slices } => levels <= 1 && stacks <= 16 && slices <= 16,
             MeshSource::Sphere { stacks, slices, .. } => stacks <= 64 && slices <= 64,
+            MeshSource::AnalyticSphere { .. } => true,
+            MeshSource::AnalyticSphereflake { levels } => levels <= 3,
         });
     if !small {
         return;
@@ -25,7 +27,7 @@ fuzz_target!(|data: &[u8]| {
     // OBJ meshes name files that do not exist: a typed error.
     let Ok(objects) = file.load_objects() else { return };
     let world = file.world(&objects);
-    let Ok(scene) = InstancedScene::build(objects, file.instances.clone(), &BuildConfig::default()) else { return };
+    let Ok(scene) = file.build_from(objects, &BuildConfig::default()) else { return };
     let r = strahl::Ray::new(glam::Vec3::new(0.0, 0.0, 10.0), glam::Vec3::new(0.0, 0.0, -1.0));
     let _ = scene.intersect(&r);
     let _ = scene.occluded(&r);
