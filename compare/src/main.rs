@@ -78,6 +78,9 @@ struct Args {
     /// sphere_tests.png and tessellation.png to --out, then exits.
     #[arg(long)]
     spheres: bool,
+    /// Internal: redraw --spheres' two charts into --out from its spheres.json, without measuring.
+    #[arg(long, hide = true)]
+    spheres_charts_from: Option<PathBuf>,
     /// Sphereflake levels for --spheres (level 3: 820 spheres, 6: 597,871).
     #[arg(long, value_delimiter = ',', default_value = "3,5,6")]
     sphere_levels: Vec<u32>,
@@ -150,6 +153,10 @@ fn main() -> anyhow::Result<()> {
         return render_comparison(&args, &pool);
     }
     let device = embree::Device::new(&format!("threads={}", args.threads))?;
+    if let Some(json) = &args.spheres_charts_from {
+        let r: compare::spheres::SphereReport = serde_json::from_slice(&std::fs::read(json)?)?;
+        return compare::spheres::charts(&args.out, &r);
+    }
     if args.spheres {
         if let Some(&l) = args.sphere_levels.iter().find(|&&l| l > 7) {
             bail!("--sphere-levels {l}: at most 7 (4.8 million spheres)");

@@ -22,7 +22,7 @@ use std::time::Instant;
 
 use anyhow::Context;
 use glam::{DVec3, Vec3};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use strahl::raygen::{self, Offset};
 use strahl::shapes::sphere_roots_f64;
 use strahl::{
@@ -43,17 +43,17 @@ pub struct Settings {
     pub passes: usize,
 }
 
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct ApiTimes {
-    pub api: &'static str,
+    pub api: String,
     /// Median Mrays/s over the passes.
     pub strahl: f64,
     pub embree: f64,
 }
 
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct EngineClass {
-    pub class: &'static str,
+    pub class: String,
     pub rays: usize,
     pub hit_rate: f64,
     pub apis: Vec<ApiTimes>,
@@ -73,7 +73,7 @@ pub struct EngineClass {
     pub embree_t_error: [f64; 3],
 }
 
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct EngineScene {
     pub levels: u32,
     pub spheres: usize,
@@ -83,9 +83,9 @@ pub struct EngineScene {
     pub classes: Vec<EngineClass>,
 }
 
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct MethodRow {
-    pub test: &'static str,
+    pub test: String,
     /// Stream API, primary rays of the near camera, median Mrays/s.
     pub mrays: f64,
     /// Per camera (near, far): relative t error median / p99.9 / max against float64, and the
@@ -100,7 +100,7 @@ pub struct MethodRow {
     pub silhouette_wrong: f64,
 }
 
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct TessRow {
     /// "analytic" or "STACKS×SLICES".
     pub model: String,
@@ -115,7 +115,7 @@ pub struct TessRow {
     pub normal_error_max: f64,
 }
 
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct SphereReport {
     pub date: String,
     pub machine: String,
@@ -341,7 +341,7 @@ fn engine_class(
     let names = ["single", "packet", "stream"];
     let apis = (0..3)
         .map(|a| ApiTimes {
-            api: names[a],
+            api: names[a].to_string(),
             strahl: n as f64 / median(&secs[0][a]) / 1e6,
             embree: n as f64 / median(&secs[1][a]) / 1e6,
         })
@@ -404,7 +404,7 @@ fn engine_class(
         }
     }
     EngineClass {
-        class: class.name(),
+        class: class.name().to_string(),
         rays: n,
         hit_rate: (0..n).filter(|&i| s.hit(i)).count() as f64 / n.max(1) as f64,
         apis,
@@ -491,7 +491,7 @@ fn run_methods(settings: &Settings, pool: &rayon::ThreadPool) -> anyhow::Result<
         pool.install(|| scenes[k].intersect_stream_par(&sil, &mut hits, Coherence::Incoherent));
         let (_, silhouette_wrong, _) = pool.install(|| against_truth(&spheres, &sil, &hits));
         rows.push(MethodRow {
-            test: test.name(),
+            test: test.name().to_string(),
             mrays: speeds[k],
             near_t_error,
             far_t_error,
@@ -646,7 +646,7 @@ pub fn markdown(r: &SphereReport) -> String {
 
 /// `sphere_tests.png` (Mrays/s against the far camera's p99.9 t error) and `tessellation.png`
 /// (Mrays/s against silhouette error, memory in the labels).
-fn charts(dir: &Path, r: &SphereReport) -> anyhow::Result<()> {
+pub fn charts(dir: &Path, r: &SphereReport) -> anyhow::Result<()> {
     use plotters::prelude::*;
     if !crate::report::ensure_font() {
         anyhow::bail!("no DejaVu font found for chart labels (apt-get install fonts-dejavu-core)");
@@ -662,18 +662,23 @@ fn charts(dir: &Path, r: &SphereReport) -> anyhow::Result<()> {
             .margin(20)
             .x_label_area_size(50)
             .y_label_area_size(60)
-            .build_cartesian_2d((xmin - 0.5)..(xmax + 0.8), 0f64..ymax)?;
+            .build_cartesian_2d((xmin - 0.5).floor()..(xmax + 2.5).ceil(), 0f64..ymax)?;
         chart
             .configure_mesh()
             .x_desc(xdesc)
             .y_desc("Mrays/s (higher is better)")
-            .x_label_formatter(&|x| format!("1e{:.0}", x))
+            // Decades only: plotters also places ticks between them.
+            .x_label_formatter(&|x| {
+                if (x - x.round()).abs() < 1e-6 { format!("1e{:.0}", x.round()) } else { String::new() }
+            })
             .label_style(("sans-serif", 14))
             .draw()?;
         chart.draw_series(points.iter().zip(&xs).map(|(p, &x)| Circle::new((x, p.2), 6, BLUE.filled())))?;
-        chart.draw_series(
-            points.iter().zip(&xs).map(|(p, &x)| Text::new(p.0.clone(), (x, p.2 + ymax * 0.03), ("sans-serif", 14))),
-        )?;
+        // Labels above their points, every second one below, so that neighbours do not overlap.
+        chart.draw_series(points.iter().zip(&xs).enumerate().map(|(i, (p, &x))| {
+            let dy = if i % 2 == 0 { 0.03 } else { -0.07 };
+            Text::new(p.0.clone(), (x, p.2 + ymax * dy), ("sans-serif", 14))
+        }))?;
         root.present()?;
         Ok(())
     };
