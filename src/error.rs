@@ -139,6 +139,24 @@ pub enum Error {
         /// The instance's index.
         instance: usize,
     },
+    /// A solid that cannot be built: bad primitive parameters (radii, NaN coefficients), a
+    /// transform that is not finite and invertible, an empty CSG operation, a disc as a CSG
+    /// operand, or a solid without bounds (a plane or quadric not intersected with a bounded
+    /// solid).
+    #[error("solid {index}: {message}")]
+    BadSolid {
+        /// The solid's index in the list given to the scene.
+        index: usize,
+        /// What is wrong.
+        message: String,
+    },
+    /// An instance places an object holding solids: two-level scenes do not instance solids yet
+    /// (each solid carries its own transform instead).
+    #[error("instance {instance} places an object holding solids; instance solids by their own transforms")]
+    SolidsInInstance {
+        /// The instance's index.
+        instance: usize,
+    },
     /// Bytes given to `Scene::from_bytes` or `InstancedScene::from_bytes` are not a scene this
     /// version wrote, or were damaged.
     #[error("serialized scene: {0}")]

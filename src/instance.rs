@@ -185,6 +185,9 @@ impl InstancedScene {
             if !is_invertible(&inst.transform) {
                 return Err(Error::BadTransform { instance: i });
             }
+            if !objects[inst.object].solids().is_empty() {
+                return Err(Error::SolidsInInstance { instance: i });
+            }
             if !objects[inst.object].spheres().is_empty() && uniform_scale(&inst.transform).is_none() {
                 return Err(Error::SphereInstanceNotSimilar { instance: i });
             }

@@ -14,7 +14,7 @@ use glam::{Affine3A, Vec3};
 
 use crate::bvh::build::MEDIAN_DEPTH;
 use crate::bvh::node::{EMPTY, Node, WIDTH, is_leaf, leaf_blocks};
-use crate::bvh::{BoxTest, BuildStats, Bvh};
+use crate::bvh::{BoxTest, BuildConfig, BuildStats, Bvh};
 use crate::error::{Error, Result};
 use crate::geometry::TriangleMesh;
 use crate::geometry::TriangleTest;
@@ -219,7 +219,7 @@ impl Scene {
         check_tree(&nodes, blocks.len(), root)?;
         check_blocks(&blocks, test, &meshes)?;
         let bvh = Bvh { nodes, blocks, root, bounds, test, box_test, stats, prefetch };
-        Scene::from_parts(meshes, bvh, spheres, sphere_test)
+        Scene::from_parts(meshes, bvh, spheres, Vec::new(), BuildConfig { sphere_test, ..BuildConfig::default() })
     }
 }
 

@@ -15,8 +15,9 @@ use crate::error::Result;
 use crate::geometry::TriangleTest;
 use crate::geometry::{TriangleMesh, load_obj};
 use crate::ray::{Hit, HitPacket, HitSlice, HitStream, PACKET_WIDTH, Ray, RayPacket, RayStream};
+use crate::shapes::solid_tree::SolidBvh;
 use crate::shapes::tree::SphereBvh;
-use crate::shapes::{SphereSet, SphereTest};
+use crate::shapes::{Solid, SphereSet, SphereTest};
 
 /// How a stream query groups its rays.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -45,13 +46,15 @@ pub enum Coherence {
 /// and 14.25 with a job per chunk (Embree's `rtcIntersect1` in the same loop: 14.3 → 17.5).
 pub const STREAM_CHUNK: usize = 4096;
 
-/// Meshes and spheres, and a BVH over each kind (see [`crate::shapes`]).
+/// Meshes, spheres and solids, and a BVH over each kind (see [`crate::shapes`]).
 #[derive(Clone, Debug)]
 pub struct Scene {
     meshes: Vec<TriangleMesh>,
     bvh: Bvh,
     spheres: Vec<SphereSet>,
     shapes: SphereBvh,
+    solids: Vec<Solid>,
+    solid_tree: SolidBvh,
 }
 
 impl Scene {
@@ -61,11 +64,13 @@ impl Scene {
         meshes: Vec<TriangleMesh>,
         bvh: Bvh,
         spheres: Vec<SphereSet>,
-        sphere_test: SphereTest,
+        solids: Vec<Solid>,
+        cfg: BuildConfig,
     ) -> Result<Self> {
-        let cfg = BuildConfig { box_test: bvh.box_test, sphere_test, ..BuildConfig::default() };
+        let cfg = BuildConfig { box_test: bvh.box_test, ..cfg };
         let shapes = SphereBvh::build(&spheres, meshes.len(), &cfg)?;
-        Ok(Self { meshes, bvh, spheres, shapes })
+        let solid_tree = SolidBvh::build(&solids, meshes.len() + spheres.len(), &cfg)?;
+        Ok(Self { meshes, bvh, spheres, shapes, solids, solid_tree })
     }
 
     /// The sphere test the scene's spheres are intersected with.
@@ -87,9 +92,40 @@ impl Scene {
         spheres: Vec<SphereSet>,
         config: &BuildConfig,
     ) -> Result<Self> {
+        Self::build_with_solids(meshes, spheres, Vec::new(), config)
+    }
+
+    /// Builds a scene of meshes, analytic spheres and solids (primitives placed by affine maps
+    /// and combined by CSG; see [`Solid`]): one BVH per kind. Geometry ids: the meshes, then the
+    /// sphere sets, then the solids (solid `i` is geometry `meshes.len() + spheres.len() + i`;
+    /// a hit's `prim_id` is the index of the primitive hit among the solid's leaves, in the
+    /// order they appear in its tree). Solids are checked: [`Error::BadSolid`](crate::Error)
+    /// names the first that cannot be built.
+    pub fn build_with_solids(
+        meshes: Vec<TriangleMesh>,
+        spheres: Vec<SphereSet>,
+        solids: Vec<Solid>,
+        config: &BuildConfig,
+    ) -> Result<Self> {
         let bvh = Bvh::build(&meshes, config)?;
         let shapes = SphereBvh::build(&spheres, meshes.len(), config)?;
-        Ok(Self { meshes, bvh, spheres, shapes })
+        let solid_tree = SolidBvh::build(&solids, meshes.len() + spheres.len(), config)?;
+        Ok(Self { meshes, bvh, spheres, shapes, solids, solid_tree })
+    }
+
+    /// The solids (geometry ids from `meshes().len() + spheres().len()` on).
+    pub fn solids(&self) -> &[Solid] {
+        &self.solids
+    }
+
+    /// The solid tree's build statistics (`shapes` solids; all zero without solids).
+    pub fn solid_stats(&self) -> &BuildStats {
+        &self.solid_tree.stats
+    }
+
+    /// The solid tree (empty without solids).
+    pub(crate) fn solid_tree(&self) -> &SolidBvh {
+        &self.solid_tree
     }
 
     /// The sphere sets (geometry ids from `meshes().len()` on).
@@ -102,10 +138,10 @@ impl Scene {
         &self.shapes.stats
     }
 
-    /// Whether the scene holds spheres.
+    /// Whether the scene holds spheres or solids.
     #[inline(always)]
     fn has_shapes(&self) -> bool {
-        !self.shapes.is_empty()
+        !self.shapes.is_empty() || !self.solid_tree.is_empty()
     }
 
     /// Loads an OBJ file (one geometry per object/group) and builds it.
@@ -128,12 +164,14 @@ impl Scene {
         &self.bvh.stats
     }
 
-    /// Bounds of the hittable triangles and the spheres, or `None` for an empty scene.
+    /// Bounds of the hittable triangles, the spheres and the solids, or `None` for an empty
+    /// scene.
     pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
-        match (self.bvh.bounds, self.shapes.bounds) {
+        let join = |a: Option<(Vec3, Vec3)>, b: Option<(Vec3, Vec3)>| match (a, b) {
             (Some(a), Some(b)) => Some((a.0.min(b.0), a.1.max(b.1))),
             (a, b) => a.or(b),
-        }
+        };
+        join(join(self.bvh.bounds, self.shapes.bounds), self.solid_tree.bounds)
     }
 
     /// Number of triangles over all meshes (hittable or not).
@@ -146,7 +184,9 @@ impl Scene {
     pub fn intersect_brute_force(&self, ray: &Ray) -> Option<Hit> {
         let tri = self.bvh.brute_force(ray).map(|h| self.bvh.hit_record(&h));
         let bounded = Ray { tfar: tri.map_or(ray.tfar, |h| h.t), ..*ray };
-        self.shapes.brute_force(&bounded).or(tri)
+        let sph = self.shapes.brute_force(&bounded).or(tri);
+        let bounded = Ray { tfar: sph.map_or(ray.tfar, |h| h.t), ..*ray };
+        self.solid_tree.brute_force(&bounded).or(sph)
     }
 
     pub(crate) fn bvh(&self) -> &Bvh {
@@ -174,11 +214,18 @@ impl Query for Scene {
             return tri;
         }
         let bounded = Ray { tfar: tri.map_or(ray.tfar, |h| h.t), ..*ray };
-        self.shapes.trace1::<false>(&bounded).or(tri)
+        let sph = self.shapes.trace1::<false>(&bounded).or(tri);
+        if self.solid_tree.is_empty() {
+            return sph;
+        }
+        let bounded = Ray { tfar: sph.map_or(ray.tfar, |h| h.t), ..*ray };
+        self.solid_tree.trace1::<false>(&bounded).or(sph)
     }
 
     fn occluded(&self, ray: &Ray) -> bool {
-        self.bvh.trace1::<true>(ray).is_some() || (self.has_shapes() && self.shapes.trace1::<true>(ray).is_some())
+        self.bvh.trace1::<true>(ray).is_some()
+            || (self.has_shapes()
+                && (self.shapes.trace1::<true>(ray).is_some() || self.solid_tree.trace1::<true>(ray).is_some()))
     }
 
     fn intersect_packet_each(&self, rays: &RayPacket, mut f: impl FnMut(usize, &Hit)) {
@@ -186,6 +233,7 @@ impl Query for Scene {
         let mut mask = self.bvh.trace_packet::<false>(rays, &mut hits);
         if self.has_shapes() {
             mask |= self.shapes.closer_packet(rays, &mut hits);
+            mask |= self.solid_tree.closer_packet(rays, &mut hits);
         }
         each_hit(&hits, mask, |lane, h| f(lane, h));
     }
@@ -194,6 +242,7 @@ impl Query for Scene {
         self.bvh.trace_packet::<false>(rays, hits);
         if self.has_shapes() {
             self.shapes.closer_packet(rays, hits);
+            self.solid_tree.closer_packet(rays, hits);
         }
     }
 
@@ -203,7 +252,12 @@ impl Query for Scene {
             return tri;
         }
         let rest = RayPacket { active: rays.active & !tri, ..*rays };
-        tri | self.shapes.trace_packet::<true>(&rest, &mut HitPacket::default())
+        let sph = tri | self.shapes.trace_packet::<true>(&rest, &mut HitPacket::default());
+        if self.solid_tree.is_empty() || sph == rays.active & crate::simd::low_bits(PACKET_WIDTH) {
+            return sph;
+        }
+        let rest = RayPacket { active: rays.active & !sph, ..*rays };
+        sph | self.solid_tree.trace_packet::<true>(&rest, &mut HitPacket::default())
     }
 
     /// Trees of more than 32 MiB. Below that, nodes come from the cache, and packets of 16 (with
@@ -220,7 +274,10 @@ impl Query for Scene {
         let mut bits = self.bvh.occluded_octant(rays, base, ids, octant);
         if self.has_shapes() {
             for (i, &id) in ids.iter().enumerate().take(32) {
-                if bits & (1 << i) == 0 && self.shapes.trace1::<true>(&rays.get(base + id as usize)).is_some() {
+                let ray = rays.get(base + id as usize);
+                if bits & (1 << i) == 0
+                    && (self.shapes.trace1::<true>(&ray).is_some() || self.solid_tree.trace1::<true>(&ray).is_some())
+                {
                     bits |= 1 << i;
                 }
             }
@@ -233,6 +290,7 @@ impl Query for Scene {
         if self.has_shapes() {
             for (p, h) in rays.iter().zip(hits.iter_mut()) {
                 self.shapes.closer_packet(p, h);
+                self.solid_tree.closer_packet(p, h);
             }
         }
     }

@@ -25,7 +25,8 @@ use strahl::{
 const CHUNK: usize = strahl::STREAM_CHUNK;
 
 /// A built scene: flat when no geometry is instanced, else every geometry is an object of a
-/// two-level scene.
+/// two-level scene. One per Python `Scene` object, so the variants' sizes do not matter.
+#[allow(clippy::large_enum_variant)]
 enum World {
     Flat(Scene),
     Instanced {

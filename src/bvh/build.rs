@@ -14,7 +14,7 @@ use rayon::prelude::*;
 use super::node::{EMPTY, MAX_LEAF_BLOCKS, Node, WIDTH, is_leaf, leaf_blocks, leaf_ref};
 use super::traverse::BoxTest;
 use crate::geometry::triangle::{BLOCK, TriangleTest};
-use crate::shapes::SphereTest;
+use crate::shapes::{QuarticSolver, SphereTest};
 use crate::simd::trunc4;
 
 /// Builder settings. Costs are per node visit and per block test, as in Embree's statistics.
@@ -38,6 +38,8 @@ pub struct BuildConfig {
     pub box_test: BoxTest,
     /// The ray–sphere test for a scene's spheres ([`SphereSet`](crate::SphereSet)).
     pub sphere_test: SphereTest,
+    /// The quartic solver for a scene's tori ([`Primitive::Torus`](crate::shapes::Primitive::Torus)).
+    pub quartic_solver: QuarticSolver,
     /// References per triangle that spatial splits may create, at most (1.0: no spatial splits,
     /// the default; [`high`](Self::high): 1.2, Embree HIGH's default).
     pub split_factor: f32,
@@ -56,6 +58,7 @@ impl Default for BuildConfig {
             triangle_test: TriangleTest::MollerTrumbore,
             box_test: BoxTest::Conservative,
             sphere_test: SphereTest::Robust,
+            quartic_solver: QuarticSolver::Bracketed,
             split_factor: 1.0,
         }
     }

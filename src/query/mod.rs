@@ -58,7 +58,8 @@ pub trait SpatialQuery: Query {
     fn for_each_hit(&self, ray: &Ray, f: impl FnMut(&Hit));
 
     /// The surface point nearest to `p` no farther than `max_distance` (`f32::INFINITY` for
-    /// any), or `None`.
+    /// any), or `None`. Triangles and spheres only: a scene's [`Solid`](crate::Solid)s are not
+    /// searched (their distance fields are not yet written).
     fn closest_point(&self, p: Vec3, max_distance: f32) -> Option<ClosestPoint>;
 
     /// Every triangle `ray` hits in `(tnear, tfar]`, nearest first, each once, into `out`
@@ -187,7 +188,8 @@ impl SpatialQuery for Scene {
     fn for_each_hit(&self, ray: &Ray, mut f: impl FnMut(&Hit)) {
         let bvh = self.bvh();
         bvh.each_hit(ray, |h| f(&bvh.hit_record(h)));
-        self.sphere_tree().each_hit(ray, f);
+        self.sphere_tree().each_hit(ray, &mut f);
+        self.solid_tree().each_hit(ray, f);
     }
 
     fn closest_point(&self, p: Vec3, max_distance: f32) -> Option<ClosestPoint> {

@@ -1,11 +1,20 @@
 //! Analytic shapes (issue 30): primitives other than triangles, traced through the same wide
-//! BVH, node tests and walks as the meshes, with their own leaf blocks and tests. So far:
-//! spheres ([`SphereSet`], `sphere.rs` for the tests, `tree.rs` for their BVH).
+//! BVH, node tests and walks as the meshes, with their own leaf blocks and tests:
+//! - spheres ([`SphereSet`], `sphere.rs` for the tests, `tree.rs` for their BVH), tested four at
+//!   a time with SIMD in float32;
+//! - solids ([`Solid`]): [`Primitive`]s (box, cylinder, cone, disc, plane, torus, general
+//!   quadric, and the sphere as an ellipsoid) placed by affine transforms and combined by CSG
+//!   (`primitive.rs`, `csg.rs`, `solve.rs` for the root finders, `solid_tree.rs` for their BVH),
+//!   one ray at a time in float64.
 //!
 //! A [`Scene`](crate::Scene) holding meshes and spheres keeps one BVH per primitive type and
 //! answers each query from both, the second walk bounded by the first's hit — as Embree keeps one
 //! acceleration structure per geometry type in a scene (`AccelN`).
 
+mod csg;
+mod primitive;
+pub(crate) mod solid_tree;
+mod solve;
 pub(crate) mod sphere;
 pub(crate) mod tree;
 
@@ -13,6 +22,9 @@ use glam::Vec3;
 
 use crate::error::{Error, Result};
 use crate::geometry::MAX_COORDINATE;
+pub use csg::{CSG_TOLERANCE, CsgOp, MAX_LEAVES, Solid};
+pub use primitive::Primitive;
+pub use solve::{QuarticSolver, quadratic, quartic};
 pub use sphere::SphereTest;
 pub use sphere::roots_f64 as sphere_roots_f64;
 

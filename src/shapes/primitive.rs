@@ -1,0 +1,443 @@
+//! The canonical shapes a [`Solid`](super::Solid) is built from, each in its own object space:
+//! where a line crosses it (the spans of the line inside it, for CSG), its outward normal, and
+//! point membership. Everything here is float64: the canonical shape is intersected with the
+//! object-space ray, which is not renormalized, so `t` is the world ray's parameter (the seeds'
+//! ellipsoid example).
+
+use glam::DVec3;
+
+use super::solve::{self, QuarticSolver};
+
+/// A canonical shape in its object space (placed in the world by a [`Solid`](super::Solid)'s
+/// transform). Solids are closed: a point is inside or outside; the disc alone is a surface.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Primitive {
+    /// The unit sphere about the origin (an ellipsoid under a non-uniform scale).
+    Sphere,
+    /// The cube `[−1, 1]³` (any box under a scale and translation): the slab test.
+    Box,
+    /// The capped cylinder `x² + y² ≤ 1`, `0 ≤ z ≤ 1`.
+    Cylinder,
+    /// The capped cone `x² + y² ≤ r(z)²`, `0 ≤ z ≤ 1`, its radius running linearly from `r0` at
+    /// `z = 0` to `r1` at `z = 1` (both `≥ 0`, not both 0).
+    Cone {
+        /// Radius at `z = 0`.
+        r0: f32,
+        /// Radius at `z = 1`.
+        r1: f32,
+    },
+    /// The disc `z = 0`, `x² + y² ≤ 1`: a surface, not a solid, so not a CSG operand. Its
+    /// normal is `+z`.
+    Disc,
+    /// The half-space `z ≤ 0`, normal `+z`: unbounded, so only a CSG operand of a bounded solid
+    /// (cut a box with it, for instance).
+    Plane,
+    /// The ring torus about the y axis (POV-Ray's orientation): the points at distance `minor`
+    /// from the circle of radius `major` in the xz plane (`0 < minor < major`). Its quartic is
+    /// solved by the scene's [`QuarticSolver`].
+    Torus {
+        /// Radius of the tube's centre circle.
+        major: f32,
+        /// Radius of the tube.
+        minor: f32,
+    },
+    /// The general quadric `A x² + B y² + C z² + D xy + E xz + F yz + G x + H y + I z + J ≤ 0`
+    /// (coefficients in that order, as POV-Ray's `quadric`): paraboloids, hyperboloids of one
+    /// and two sheets, cones, cylinders. Unbounded in general, so only a CSG operand, clipped by
+    /// intersecting it with a bounded solid.
+    Quadric {
+        /// `[A, B, C, D, E, F, G, H, I, J]`.
+        coeffs: [f32; 10],
+    },
+}
+
+/// One end of a span: where the line crosses a leaf's surface, which leaf (its index in the
+/// solid), which face of it (box faces `2·axis + side`; cone and cylinder: 0 the side, 1 the
+/// base, 2 the cap; 0 otherwise), and whether the normal is flipped (the leaf was subtracted).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Bound {
+    pub t: f64,
+    pub leaf: u16,
+    pub face: u8,
+    pub flip: bool,
+}
+
+/// A piece of the line inside a solid, `enter.t ≤ exit.t`; ends may be infinite.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Span {
+    pub enter: Bound,
+    pub exit: Bound,
+}
+
+impl Span {
+    fn new(t0: f64, f0: u8, t1: f64, f1: u8, leaf: u16) -> Self {
+        Span { enter: Bound { t: t0, leaf, face: f0, flip: false }, exit: Bound { t: t1, leaf, face: f1, flip: false } }
+    }
+}
+
+/// Up to two spans of one primitive (every primitive here crosses a line at most four times).
+pub(crate) type Spans = ([Span; 2], usize);
+
+const NONE: Spans = ([Span { enter: B0, exit: B0 }; 2], 0);
+const B0: Bound = Bound { t: 0.0, leaf: 0, face: 0, flip: false };
+
+/// The spans of the line `o + t d` inside `{a t² + b t + c ≤ 0}`, faces `face`.
+fn quadratic_spans(a: f64, b: f64, c: f64, leaf: u16, face: u8) -> Spans {
+    const INF: f64 = f64::INFINITY;
+    let one = |t0, t1| ([Span::new(t0, face, t1, face, leaf), Span::new(0.0, 0, 0.0, 0, 0)], 1);
+    if a == 0.0 {
+        // Linear: b t + c ≤ 0.
+        return if b > 0.0 {
+            one(-INF, -c / b)
+        } else if b < 0.0 {
+            one(-c / b, INF)
+        } else if c <= 0.0 {
+            one(-INF, INF)
+        } else {
+            NONE
+        };
+    }
+    let (r, n) = solve::quadratic([c, b, a]);
+    match (n, a > 0.0) {
+        (2, true) => one(r[0], r[1]),
+        (2, false) => ([Span::new(-INF, face, r[0], face, leaf), Span::new(r[1], face, INF, face, leaf)], 2),
+        (_, true) => NONE,
+        (_, false) => one(-INF, INF),
+    }
+}
+
+/// The spans of `s` (ascending, disjoint) cut to `[lo, hi]` with faces `flo`, `fhi`.
+fn clip(s: Spans, lo: f64, flo: u8, hi: f64, fhi: u8, leaf: u16) -> Spans {
+    let mut out = NONE;
+    for sp in &s.0[..s.1] {
+        let mut sp = *sp;
+        if sp.enter.t < lo {
+            sp.enter = Bound { t: lo, leaf, face: flo, flip: false };
+        }
+        if sp.exit.t > hi {
+            sp.exit = Bound { t: hi, leaf, face: fhi, flip: false };
+        }
+        if sp.enter.t <= sp.exit.t {
+            out.0[out.1] = sp;
+            out.1 += 1;
+        }
+    }
+    out
+}
+
+/// `[−1, 1]` along one axis: the slab's span of the line with faces `2·axis + side`, or
+/// `None` (no crossing) / the whole line (parallel, inside).
+#[inline(always)]
+fn slab(o: f64, d: f64, lo: f64, hi: f64, axis: u8) -> Option<(f64, u8, f64, u8)> {
+    if d == 0.0 {
+        return (o >= lo && o <= hi).then_some((f64::NEG_INFINITY, 2 * axis, f64::INFINITY, 2 * axis + 1));
+    }
+    let (ta, tb) = ((lo - o) / d, (hi - o) / d);
+    Some(if d > 0.0 { (ta, 2 * axis, tb, 2 * axis + 1) } else { (tb, 2 * axis + 1, ta, 2 * axis) })
+}
+
+impl Primitive {
+    /// The radii of a cone or cylinder.
+    fn cone_radii(&self) -> Option<(f64, f64)> {
+        match *self {
+            Primitive::Cylinder => Some((1.0, 1.0)),
+            Primitive::Cone { r0, r1 } => Some((r0 as f64, r1 as f64)),
+            _ => None,
+        }
+    }
+
+    /// The spans of the line `o + t d` (object space, any `d ≠ 0`) inside this primitive, over
+    /// all `t` (also behind the ray's start: a ray may start inside). The disc gives its one
+    /// crossing as a span of zero width.
+    pub(crate) fn spans(&self, o: DVec3, d: DVec3, solver: QuarticSolver, leaf: u16) -> Spans {
+        match *self {
+            Primitive::Sphere => {
+                // Ray Tracing Gems ch. 7: the discriminant from the distance of the line to the
+                // centre, `1 − |o − (o·d / d·d) d|²`, which does not cancel for far rays.
+                let a = d.dot(d);
+                let b = o.dot(d);
+                let f = o - (b / a) * d;
+                let disc = 1.0 - f.dot(f);
+                if disc < 0.0 {
+                    return NONE;
+                }
+                let q = -b - (a * disc).sqrt().copysign(b);
+                let c = o.dot(o) - 1.0;
+                let (t0, t1) = if q == 0.0 { (0.0, 0.0) } else { (c / q, q / a) };
+                ([Span::new(t0.min(t1), 0, t0.max(t1), 0, leaf), NONE.0[0]], 1)
+            }
+            Primitive::Box => {
+                let mut span = (f64::NEG_INFINITY, 0u8, f64::INFINITY, 1u8);
+                for axis in 0..3 {
+                    let Some((t0, f0, t1, f1)) = slab(o[axis], d[axis], -1.0, 1.0, axis as u8) else {
+                        return NONE;
+                    };
+                    if t0 > span.0 {
+                        span.0 = t0;
+                        span.1 = f0;
+                    }
+                    if t1 < span.2 {
+                        span.2 = t1;
+                        span.3 = f1;
+                    }
+                }
+                if span.0 > span.2 {
+                    return NONE;
+                }
+                ([Span::new(span.0, span.1, span.2, span.3, leaf), NONE.0[0]], 1)
+            }
+            Primitive::Cylinder | Primitive::Cone { .. } => {
+                let (r0, r1) = self.cone_radii().unwrap_or((1.0, 1.0));
+                let k = r1 - r0;
+                let rz = r0 + k * o.z;
+                let a = d.x * d.x + d.y * d.y - k * k * d.z * d.z;
+                let b = 2.0 * (o.x * d.x + o.y * d.y - k * d.z * rz);
+                let c = o.x * o.x + o.y * o.y - rz * rz;
+                let side = quadratic_spans(a, b, c, leaf, 0);
+                // The caps: faces 1 (z = 0) and 2 (z = 1).
+                let Some((t0, f0, t1, f1)) = slab(o.z, d.z, 0.0, 1.0, 2) else {
+                    return NONE;
+                };
+                let (f0, f1) = (f0 - 3, f1 - 3);
+                clip(side, t0, f0, t1, f1, leaf)
+            }
+            Primitive::Disc => {
+                if d.z == 0.0 {
+                    return NONE;
+                }
+                let t = -o.z / d.z;
+                let p = o + t * d;
+                if p.x * p.x + p.y * p.y > 1.0 {
+                    return NONE;
+                }
+                ([Span::new(t, 0, t, 0, leaf), NONE.0[0]], 1)
+            }
+            Primitive::Plane => quadratic_spans(0.0, d.z, o.z, leaf, 0),
+            Primitive::Quadric { coeffs } => {
+                let [qa, qb, qc, qd, qe, qf, qg, qh, qi, _] = coeffs.map(|x| x as f64);
+                let a =
+                    qa * d.x * d.x + qb * d.y * d.y + qc * d.z * d.z + qd * d.x * d.y + qe * d.x * d.z + qf * d.y * d.z;
+                let b = 2.0 * (qa * o.x * d.x + qb * o.y * d.y + qc * o.z * d.z)
+                    + qd * (o.x * d.y + o.y * d.x)
+                    + qe * (o.x * d.z + o.z * d.x)
+                    + qf * (o.y * d.z + o.z * d.y)
+                    + qg * d.x
+                    + qh * d.y
+                    + qi * d.z;
+                quadratic_spans(a, b, self.field(o), leaf, 0)
+            }
+            Primitive::Torus { major, minor } => torus_spans(major as f64, minor as f64, o, d, solver, leaf),
+        }
+    }
+
+    /// The implicit function, negative inside (for the torus, the quadric and tests).
+    pub(crate) fn field(&self, p: DVec3) -> f64 {
+        match *self {
+            Primitive::Sphere => p.dot(p) - 1.0,
+            Primitive::Box => p.abs().max_element() - 1.0,
+            Primitive::Cylinder | Primitive::Cone { .. } => {
+                let (r0, r1) = self.cone_radii().unwrap_or((1.0, 1.0));
+                let r = r0 + (r1 - r0) * p.z;
+                let lateral = p.x * p.x + p.y * p.y - r * r;
+                lateral.max(-p.z).max(p.z - 1.0)
+            }
+            Primitive::Disc => 1.0,
+            Primitive::Plane => p.z,
+            Primitive::Torus { major, minor } => {
+                let (big, small) = (major as f64, minor as f64);
+                let g = p.dot(p) + big * big - small * small;
+                g * g - 4.0 * big * big * (p.x * p.x + p.z * p.z)
+            }
+            Primitive::Quadric { coeffs } => {
+                let [a, b, c, d, e, f, g, h, i, j] = coeffs.map(|x| x as f64);
+                a * p.x * p.x
+                    + b * p.y * p.y
+                    + c * p.z * p.z
+                    + d * p.x * p.y
+                    + e * p.x * p.z
+                    + f * p.y * p.z
+                    + g * p.x
+                    + h * p.y
+                    + i * p.z
+                    + j
+            }
+        }
+    }
+
+    /// Whether the object-space point `p` lies inside (boundary included); the disc contains
+    /// nothing.
+    pub fn contains(&self, p: DVec3) -> bool {
+        self.field(p) <= 0.0
+    }
+
+    /// The outward normal (not normalized) at the object-space surface point `p` on `face`.
+    pub(crate) fn normal(&self, p: DVec3, face: u8) -> DVec3 {
+        match *self {
+            Primitive::Sphere => p,
+            Primitive::Box => {
+                let mut n = DVec3::ZERO;
+                n[(face / 2) as usize] = if face % 2 == 1 { 1.0 } else { -1.0 };
+                n
+            }
+            Primitive::Cylinder | Primitive::Cone { .. } => match face {
+                1 => DVec3::NEG_Z,
+                2 => DVec3::Z,
+                _ => {
+                    let (r0, r1) = self.cone_radii().unwrap_or((1.0, 1.0));
+                    let k = r1 - r0;
+                    DVec3::new(p.x, p.y, -(r0 + k * p.z) * k)
+                }
+            },
+            Primitive::Disc | Primitive::Plane => DVec3::Z,
+            Primitive::Torus { major, minor } => {
+                let (big, small) = (major as f64, minor as f64);
+                let g = p.dot(p) + big * big - small * small;
+                g * p - 2.0 * big * big * DVec3::new(p.x, 0.0, p.z)
+            }
+            Primitive::Quadric { coeffs } => {
+                let [a, b, c, d, e, f, g, h, i, _] = coeffs.map(|x| x as f64);
+                DVec3::new(
+                    2.0 * a * p.x + d * p.y + e * p.z + g,
+                    2.0 * b * p.y + d * p.x + f * p.z + h,
+                    2.0 * c * p.z + e * p.x + f * p.y + i,
+                )
+            }
+        }
+    }
+
+    /// Object-space bounds, or `None` for the unbounded plane and quadric.
+    pub(crate) fn bounds(&self) -> Option<(DVec3, DVec3)> {
+        match *self {
+            Primitive::Sphere | Primitive::Box => Some((DVec3::splat(-1.0), DVec3::ONE)),
+            Primitive::Cylinder | Primitive::Cone { .. } => {
+                let (r0, r1) = self.cone_radii().unwrap_or((1.0, 1.0));
+                let r = r0.max(r1);
+                Some((DVec3::new(-r, -r, 0.0), DVec3::new(r, r, 1.0)))
+            }
+            Primitive::Disc => Some((DVec3::new(-1.0, -1.0, 0.0), DVec3::new(1.0, 1.0, 0.0))),
+            Primitive::Torus { major, minor } => {
+                let (big, small) = (major as f64, minor as f64);
+                let e = DVec3::new(big + small, small, big + small);
+                Some((-e, e))
+            }
+            Primitive::Plane | Primitive::Quadric { .. } => None,
+        }
+    }
+
+    /// Why these parameters describe no shape, if they do not.
+    pub(crate) fn check(&self) -> Option<String> {
+        match *self {
+            Primitive::Cone { r0, r1 } if !(r0 >= 0.0 && r1 >= 0.0 && r0.max(r1) > 0.0 && r0.max(r1).is_finite()) => {
+                Some(format!("cone radii {r0} and {r1}: both must be finite and ≥ 0, not both 0"))
+            }
+            Primitive::Torus { major, minor } if !(minor > 0.0 && minor < major && major.is_finite()) => {
+                Some(format!("torus radii {major} and {minor}: need 0 < minor < major, finite"))
+            }
+            Primitive::Quadric { coeffs } if coeffs.iter().any(|c| !c.is_finite()) => {
+                Some(format!("quadric coefficients {coeffs:?} are not all finite"))
+            }
+            Primitive::Quadric { coeffs } if coeffs[..9].iter().all(|&c| c == 0.0) => {
+                Some("quadric coefficients A to I are all zero: no surface".into())
+            }
+            _ => None,
+        }
+    }
+}
+
+/// The torus's spans: the quartic `F(t) = G² − 4R²(x² + z²)`, `G = |p|² + R² − r²`, solved on
+/// the chord of its bounding sphere, with the origin moved to where the chord starts and the
+/// direction normalized (POV-Ray's practice: far origins otherwise cancel away the roots). The
+/// pieces between roots are classified by `F` at their middles, so a root the solver loses
+/// merges two pieces instead of turning the inside out.
+fn torus_spans(big: f64, small: f64, o: DVec3, d: DVec3, solver: QuarticSolver, leaf: u16) -> Spans {
+    let len = d.length();
+    let u = d / len;
+    // The bounding sphere, radius R + r (a little more, so the chord's ends lie outside).
+    let rb = (big + small) * (1.0 + 1e-9);
+    let b = o.dot(u);
+    let f = o - b * u;
+    let disc = rb * rb - f.dot(f);
+    if disc <= 0.0 {
+        return NONE;
+    }
+    let h = disc.sqrt();
+    let (s0, s1) = (-b - h, -b + h);
+    let p = o + s0 * u;
+    let e = p.dot(p) + big * big - small * small;
+    let pu = p.dot(u);
+    let r2 = 4.0 * big * big;
+    let c = [
+        e * e - r2 * (p.x * p.x + p.z * p.z),
+        4.0 * pu * e - 2.0 * r2 * (p.x * u.x + p.z * u.z),
+        4.0 * pu * pu + 2.0 * e - r2 * (u.x * u.x + u.z * u.z),
+        4.0 * pu,
+        1.0,
+    ];
+    let mut roots = [0.0; 4];
+    let n = solve::quartic(solver, c, 0.0, s1 - s0, &mut roots);
+    let field = |s: f64| {
+        let q = p + s * u;
+        let g = q.dot(q) + big * big - small * small;
+        g * g - r2 * (q.x * q.x + q.z * q.z)
+    };
+    let mut out = NONE;
+    let mut open: Option<f64> = None;
+    let mut prev = 0.0;
+    for &r in roots[..n].iter().chain(std::iter::once(&(s1 - s0))) {
+        let inside = field(0.5 * (prev + r)) < 0.0;
+        match (inside, open) {
+            (true, None) => open = Some(prev),
+            (false, Some(start)) => {
+                if out.1 < 2 {
+                    out.0[out.1] = Span::new(s0 + start, 0, s0 + prev, 0, leaf);
+                    out.1 += 1;
+                }
+                open = None;
+            }
+            _ => {}
+        }
+        prev = r;
+    }
+    if let Some(start) = open
+        && out.1 < 2
+    {
+        out.0[out.1] = Span::new(s0 + start, 0, s1, 0, leaf);
+        out.1 += 1;
+    }
+    // From arc length along `u` back to the ray's parameter.
+    for sp in &mut out.0[..out.1] {
+        sp.enter.t /= len;
+        sp.exit.t /= len;
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn torus_solvers_find_the_same_crossings() {
+        let torus = Primitive::Torus { major: 1.0, minor: 0.25 };
+        let mut seed = 1u64;
+        let mut rnd = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        };
+        for _ in 0..20000 {
+            let o = DVec3::new(rnd(), rnd(), rnd()).normalize() * 5.0;
+            let d = DVec3::new(rnd(), rnd(), rnd()) * 1.3 - o;
+            let a = torus.spans(o, d, QuarticSolver::Ferrari, 0);
+            let b = torus.spans(o, d, QuarticSolver::Bracketed, 0);
+            assert_eq!(a.1, b.1, "{o} {d} {a:?} {b:?}");
+            for (x, y) in a.0[..a.1].iter().zip(&b.0[..b.1]) {
+                for (p, q) in [(x.enter.t, y.enter.t), (x.exit.t, y.exit.t)] {
+                    let (fp, fq) = (torus.field(o + p * d), torus.field(o + q * d));
+                    assert!((p - q).abs() < 1e-9, "{o} {d} {p} {q} fields {fp} {fq}");
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,282 @@
+//! Solids (issue 30): primitives placed by affine maps and combined by CSG, checked against
+//! point membership (`Solid::contains`, evaluated on the tree in float64) and across the query
+//! forms (single, packet, stream; closest and any hit; tree against brute force).
+
+use glam::{Affine3A, Quat, Vec3};
+use strahl::{
+    BuildConfig, CsgOp, Error, HitStream, Primitive, QuarticSolver, Query, Ray, RayPacket, RayStream, Scene, Solid,
+    SpatialQuery,
+};
+
+/// A small deterministic generator (xorshift), uniform in [0, 1).
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> f32 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        (self.0 >> 40) as f32 / (1u64 << 24) as f32
+    }
+    fn range(&mut self, lo: f32, hi: f32) -> f32 {
+        lo + (hi - lo) * self.next()
+    }
+    fn vec(&mut self, r: f32) -> Vec3 {
+        Vec3::new(self.range(-r, r), self.range(-r, r), self.range(-r, r))
+    }
+}
+
+fn placed(p: Primitive, scale: Vec3, angle: f32, at: Vec3) -> Solid {
+    Solid::new(p).transformed(Affine3A::from_scale_rotation_translation(
+        scale,
+        Quat::from_axis_angle(Vec3::new(1.0, 2.0, 3.0).normalize(), angle),
+        at,
+    ))
+}
+
+/// The die of the issue: a cube intersected with a sphere, minus pips, on a CSG tree.
+fn die() -> Solid {
+    let body = Solid::intersection(vec![
+        Solid::new(Primitive::Box),
+        Solid::new(Primitive::Sphere).transformed(Affine3A::from_scale(Vec3::splat(1.35))),
+    ]);
+    let pip = |at: Vec3| {
+        Solid::new(Primitive::Sphere).transformed(Affine3A::from_scale_rotation_translation(
+            Vec3::splat(0.18),
+            Quat::IDENTITY,
+            at,
+        ))
+    };
+    let mut pips = vec![pip(Vec3::new(0.0, 0.0, 1.0))];
+    for s in [-0.5, 0.5] {
+        pips.push(pip(Vec3::new(1.0, s, s)));
+        pips.push(pip(Vec3::new(s, 1.0, -s)));
+    }
+    Solid::difference(vec![body, Solid::union(pips)])
+}
+
+/// A solid of every closed primitive, and some CSG.
+fn gallery() -> Vec<Solid> {
+    vec![
+        placed(Primitive::Sphere, Vec3::new(1.0, 0.5, 0.7), 0.3, Vec3::new(-3.0, 0.0, 0.0)),
+        placed(Primitive::Box, Vec3::new(0.8, 0.3, 0.5), 0.7, Vec3::new(0.0, 3.0, 0.0)),
+        placed(Primitive::Cylinder, Vec3::new(0.5, 0.5, 1.5), 1.1, Vec3::new(3.0, 0.0, 0.0)),
+        placed(Primitive::Cone { r0: 0.8, r1: 0.2 }, Vec3::ONE, 0.4, Vec3::new(0.0, -3.0, 0.0)),
+        placed(Primitive::Cone { r0: 0.0, r1: 1.0 }, Vec3::ONE, 2.0, Vec3::new(-3.0, -3.0, 0.0)),
+        placed(Primitive::Torus { major: 1.0, minor: 0.3 }, Vec3::ONE, 0.9, Vec3::new(3.0, 3.0, 0.0)),
+        placed(Primitive::Torus { major: 1.0, minor: 0.05 }, Vec3::ONE, 1.3, Vec3::new(-3.0, 3.0, 0.0)),
+        die().transformed(Affine3A::from_rotation_translation(Quat::from_rotation_y(0.5), Vec3::new(0.0, 0.0, 0.0))),
+        // A hyperboloid of one sheet, x² + y² − z² − 0.25 ≤ 0, clipped by a box.
+        Solid::intersection(vec![
+            Solid::new(Primitive::Quadric { coeffs: [1.0, 1.0, -1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -0.25] }),
+            Solid::new(Primitive::Box),
+        ])
+        .transformed(Affine3A::from_translation(Vec3::new(3.0, -3.0, 0.0))),
+        // A box cut by a tilted half-space.
+        Solid::intersection(vec![
+            Solid::new(Primitive::Box),
+            Solid::new(Primitive::Plane).transformed(Affine3A::from_rotation_x(0.6)),
+        ])
+        .transformed(Affine3A::from_translation(Vec3::new(0.0, 0.0, 3.0))),
+    ]
+}
+
+fn scene_of(solids: Vec<Solid>, solver: QuarticSolver) -> Scene {
+    let cfg = BuildConfig { quartic_solver: solver, ..BuildConfig::default() };
+    Scene::build_with_solids(Vec::new(), Vec::new(), solids, &cfg).unwrap()
+}
+
+/// Random rays from outside the gallery towards points inside it.
+fn rays(n: usize, seed: u64) -> Vec<Ray> {
+    let mut rng = Rng(seed);
+    (0..n)
+        .map(|_| {
+            let o = rng.vec(1.0).normalize() * 12.0;
+            let target = rng.vec(4.2);
+            Ray::new(o, (target - o) * rng.range(0.5, 2.0))
+        })
+        .collect()
+}
+
+#[test]
+fn every_hit_is_a_change_of_membership() {
+    let solids = gallery();
+    let scene = scene_of(solids.clone(), QuarticSolver::Bracketed);
+    let mut checked = 0;
+    for ray in rays(20_000, 7) {
+        let mut hits = Vec::new();
+        scene.for_each_hit(&ray, |h| hits.push(*h));
+        for h in &hits {
+            let solid = &solids[h.geom_id as usize];
+            let len = ray.dir.length();
+            // Membership a little before and after the crossing, 2e-4 in world length: the
+            // points straddle the surface unless another surface of the solid lies that near.
+            let eps = 2e-4 / len;
+            let (before, after) = (solid.contains(ray.at(h.t - eps)), solid.contains(ray.at(h.t + eps)));
+            let facing_in = h.ng.dot(ray.dir) < 0.0;
+            if before != after {
+                // Entering where the outward normal faces the ray.
+                assert_eq!(after, facing_in, "ray {ray:?} hit {h:?}: normal against membership");
+                checked += 1;
+            } else {
+                // Only near another crossing of the same solid (a thin wall, an edge).
+                let near = hits.iter().any(|o| o.geom_id == h.geom_id && o != h && (o.t - h.t).abs() * len < 1e-3);
+                assert!(near, "ray {ray:?}: hit {h:?} changes no membership ({before})");
+            }
+        }
+    }
+    assert!(checked > 10_000, "{checked}");
+}
+
+#[test]
+fn membership_by_crossing_parity_matches_point_membership() {
+    let solids = gallery();
+    let scene = scene_of(solids.clone(), QuarticSolver::Bracketed);
+    let mut rng = Rng(99);
+    let (mut inside, mut mismatches) = (0, 0);
+    for _ in 0..20_000 {
+        let p = rng.vec(4.2);
+        let dir = rng.vec(1.0);
+        let ray = Ray::new(p, dir);
+        let mut counts = vec![0usize; solids.len()];
+        scene.for_each_hit(&ray, |h| counts[h.geom_id as usize] += 1);
+        for (s, &c) in solids.iter().zip(&counts) {
+            let member = s.contains(p);
+            inside += member as usize;
+            if member != (c % 2 == 1) {
+                mismatches += 1;
+            }
+        }
+    }
+    // A ray through an edge or a tangent may miscount; the rate must stay tiny.
+    assert!(inside > 500, "{inside}");
+    assert!(mismatches <= 2, "{mismatches} of 20000×{} points misclassified", solids.len());
+}
+
+#[test]
+fn queries_agree_across_forms() {
+    let scene = scene_of(gallery(), QuarticSolver::Bracketed);
+    let rays = rays(4096, 3);
+    let single: Vec<_> = rays.iter().map(|r| scene.intersect(r)).collect();
+    let hits = single.iter().filter(|h| h.is_some()).count();
+    assert!(hits > 1000 && hits < 4000, "{hits}");
+    for (r, h) in rays.iter().zip(&single) {
+        assert_eq!(scene.intersect_brute_force(r), *h);
+        assert_eq!(scene.occluded(r), h.is_some());
+    }
+    for (k, chunk) in rays.chunks(16).enumerate() {
+        let p = RayPacket::from_rays(chunk);
+        let mut lanes = vec![None; 16];
+        scene.intersect_packet_each(&p, |l, h| lanes[l] = Some(*h));
+        assert_eq!(&lanes[..chunk.len()], &single[16 * k..16 * k + chunk.len()]);
+        let occ = scene.occluded_packet(&p);
+        for (l, h) in single[16 * k..16 * k + chunk.len()].iter().enumerate() {
+            assert_eq!(occ >> l & 1 == 1, h.is_some());
+        }
+    }
+    let mut stream = RayStream::with_capacity(rays.len());
+    rays.iter().for_each(|r| stream.push(r));
+    for coherence in [strahl::Coherence::Coherent, strahl::Coherence::Incoherent] {
+        let mut out = HitStream::misses(rays.len());
+        scene.intersect_stream_par(&stream, &mut out, coherence);
+        for (i, h) in single.iter().enumerate() {
+            assert_eq!(out.get(i), *h, "ray {i}");
+        }
+    }
+}
+
+#[test]
+fn torus_solvers_agree_away_from_tangents() {
+    let torus = || vec![placed(Primitive::Torus { major: 1.0, minor: 0.25 }, Vec3::ONE, 0.7, Vec3::ZERO)];
+    let (a, b) = (scene_of(torus(), QuarticSolver::Ferrari), scene_of(torus(), QuarticSolver::Bracketed));
+    let mut rng = Rng(5);
+    let (mut hits, mut differ) = (0, 0);
+    for _ in 0..20_000 {
+        let o = rng.vec(1.0).normalize() * 5.0;
+        let ray = Ray::new(o, rng.vec(1.3) - o);
+        match (a.intersect(&ray), b.intersect(&ray)) {
+            (Some(x), Some(y)) => {
+                hits += 1;
+                assert!((x.t - y.t).abs() <= 1e-5 * x.t, "{x:?} {y:?}");
+            }
+            (None, None) => {}
+            _ => differ += 1,
+        }
+    }
+    assert!(hits > 5000, "{hits}");
+    assert!(differ <= 4, "{differ} rays hit with one solver only");
+}
+
+#[test]
+fn ellipsoid_normals_are_the_gradient() {
+    // The seeds' ellipsoid: a unit sphere scaled by (2, 1, 0.5); its outward normal at p is
+    // (x/4, y, 4z) normalized.
+    let e = Solid::new(Primitive::Sphere).transformed(Affine3A::from_scale(Vec3::new(2.0, 1.0, 0.5)));
+    let scene = scene_of(vec![e], QuarticSolver::Bracketed);
+    let mut rng = Rng(11);
+    for _ in 0..1000 {
+        let o = rng.vec(1.0).normalize() * 6.0;
+        let ray = Ray::new(o, rng.vec(0.4) - o);
+        if let Some(h) = scene.intersect(&ray) {
+            let p = ray.at(h.t);
+            let want = Vec3::new(p.x / 4.0, p.y, 4.0 * p.z).normalize();
+            assert!(h.ng.normalize().dot(want) > 0.99999, "{:?} {want}", h.ng);
+            let on = (p / Vec3::new(2.0, 1.0, 0.5)).length();
+            assert!((on - 1.0).abs() < 1e-5, "{on}");
+        }
+    }
+}
+
+#[test]
+fn rays_starting_inside_hit_the_way_out() {
+    let scene = scene_of(vec![die()], QuarticSolver::Bracketed);
+    let h = scene.intersect(&Ray::new(Vec3::ZERO, Vec3::Z)).unwrap();
+    // The pip at z = 1 carves the face: its surface is 0.18 in.
+    assert!((h.t - 0.82).abs() < 1e-5, "{h:?}");
+    // The die's outward normal there points out of its material, into the pip's hollow.
+    assert!(h.ng.dot(Vec3::Z) > 0.99, "{h:?}");
+    let h = scene.intersect(&Ray::new(Vec3::ZERO, -Vec3::Y)).unwrap();
+    assert!((h.t - 1.0).abs() < 1e-6 && h.ng.dot(-Vec3::Y) > 0.99, "{h:?}");
+}
+
+#[test]
+fn bad_solids_are_typed_errors() {
+    let bad = |s: Solid| match Scene::build_with_solids(
+        Vec::new(),
+        Vec::new(),
+        vec![Solid::new(Primitive::Box), s],
+        &BuildConfig::default(),
+    ) {
+        Err(Error::BadSolid { index: 1, message }) => message,
+        other => panic!("{other:?}"),
+    };
+    bad(Solid::new(Primitive::Cone { r0: -1.0, r1: 1.0 }));
+    bad(Solid::new(Primitive::Cone { r0: 0.0, r1: 0.0 }));
+    bad(Solid::new(Primitive::Torus { major: 1.0, minor: 1.5 }));
+    bad(Solid::new(Primitive::Torus { major: f32::NAN, minor: 0.5 }));
+    bad(Solid::new(Primitive::Quadric { coeffs: [f32::NAN; 10] }));
+    bad(Solid::new(Primitive::Quadric { coeffs: [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0] }));
+    assert!(bad(Solid::new(Primitive::Plane)).contains("unbounded"));
+    assert!(bad(Solid::union(vec![Solid::new(Primitive::Box), Solid::new(Primitive::Plane)])).contains("unbounded"));
+    bad(Solid::union(Vec::new()));
+    bad(Solid::intersection(vec![Solid::new(Primitive::Box), Solid::new(Primitive::Disc)]));
+    bad(Solid::new(Primitive::Box).transformed(Affine3A::from_scale(Vec3::new(1.0, 0.0, 1.0))));
+    bad(Solid::new(Primitive::Box).transformed(Affine3A::from_translation(Vec3::splat(f32::NAN))));
+    bad(Solid::new(Primitive::Sphere).transformed(Affine3A::from_scale(Vec3::splat(1e30))));
+    // A disc alone is a surface; an unbounded quadric clipped by a box is bounded.
+    let ok = Scene::build_with_solids(
+        Vec::new(),
+        Vec::new(),
+        vec![
+            Solid::new(Primitive::Disc).transformed(Affine3A::from_translation(Vec3::new(0.0, 0.0, 2.0))),
+            Solid::Csg(CsgOp::Intersection, vec![Solid::new(Primitive::Plane), Solid::new(Primitive::Box)]),
+        ],
+        &BuildConfig::default(),
+    )
+    .unwrap();
+    let h = ok.intersect(&Ray::new(Vec3::new(0.3, 0.2, 5.0), -Vec3::Z)).unwrap();
+    assert_eq!((h.t, h.geom_id), (3.0, 0));
+    // Invalid rays miss.
+    for r in [Ray::new(Vec3::splat(f32::NAN), Vec3::X), Ray::new(Vec3::ZERO, Vec3::ZERO)] {
+        assert!(ok.intersect(&r).is_none() && !ok.occluded(&r));
+    }
+}
