@@ -150,13 +150,6 @@ pub enum Error {
         /// What is wrong.
         message: String,
     },
-    /// An instance places an object holding solids: two-level scenes do not instance solids yet
-    /// (each solid carries its own transform instead).
-    #[error("instance {instance} places an object holding solids; instance solids by their own transforms")]
-    SolidsInInstance {
-        /// The instance's index.
-        instance: usize,
-    },
     /// Bytes given to `Scene::from_bytes` or `InstancedScene::from_bytes` are not a scene this
     /// version wrote, or were damaged.
     #[error("serialized scene: {0}")]

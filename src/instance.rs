@@ -185,9 +185,6 @@ impl InstancedScene {
             if !is_invertible(&inst.transform) {
                 return Err(Error::BadTransform { instance: i });
             }
-            if !objects[inst.object].solids().is_empty() {
-                return Err(Error::SolidsInInstance { instance: i });
-            }
             if !objects[inst.object].spheres().is_empty() && uniform_scale(&inst.transform).is_none() {
                 return Err(Error::SphereInstanceNotSimilar { instance: i });
             }
@@ -239,7 +236,8 @@ impl InstancedScene {
                 }
             })
             .collect();
-        let object_bytes: usize = objects.iter().map(|o| o.stats().bytes + o.sphere_stats().bytes).sum();
+        let object_bytes: usize =
+            objects.iter().map(|o| o.stats().bytes + o.sphere_stats().bytes + o.solid_stats().bytes).sum();
         // Objects out of the cache together prefetch in their walks (see the constant).
         for o in &mut objects {
             o.set_prefetch(object_bytes > INSTANCED_FAR_MEMORY_BYTES);
@@ -294,9 +292,13 @@ impl InstancedScene {
     pub fn flatten(&self, config: &BuildConfig) -> Result<Scene> {
         let mut meshes = Vec::new();
         let mut spheres = Vec::new();
+        let mut solids = Vec::new();
         for (i, inst) in self.instances.iter().enumerate() {
             for m in self.objects[inst.object].meshes() {
                 meshes.push(m.transformed(&inst.transform));
+            }
+            for s in self.objects[inst.object].solids() {
+                solids.push(s.clone().transformed(inst.transform));
             }
             // Instances of objects with spheres are similarities (checked when built).
             let s = uniform_scale(&inst.transform).unwrap_or(1.0);
@@ -310,7 +312,7 @@ impl InstancedScene {
                 spheres.push(SphereSet::from_pairs(format!("{}@{i}", set.name()), &moved)?);
             }
         }
-        Scene::build_with_spheres(meshes, spheres, config)
+        Scene::build_with_solids(meshes, spheres, solids, config)
     }
 
     /// The closest hit among every instance by testing every object triangle of every instance
@@ -415,6 +417,16 @@ impl InstancedScene {
                         return true;
                     }
                 }
+                let solids = object.solid_tree();
+                if !solids.is_empty()
+                    && let Some(h) = solids.trace1_on::<ANY, CONS>(&Ray { tfar: *tfar, ..r }, stack)
+                {
+                    *tfar = h.t;
+                    best = Some((k as u32, ObjHit::Sphere(p.sphere_hit(h))));
+                    if ANY {
+                        return true;
+                    }
+                }
             }
             false
         });
@@ -474,6 +486,7 @@ impl InstancedScene {
                 let (q, [qo, qd]) = object_packet(&pl.to_object, &pb, *tfar, active);
                 let bvh = self.objects[pl.object as usize].bvh();
                 let spheres = self.objects[pl.object as usize].sphere_tree();
+                let solids = self.objects[pl.object as usize].solid_tree();
                 if !ANY && pb.frustum.is_none() && !packet_walks_object(active, spread, pl) {
                     // Incoherent closest-hit rays: each lane that enters the instance walks the
                     // object alone, as Embree's instances hand their lanes to the object's hybrid
@@ -490,26 +503,34 @@ impl InstancedScene {
                         |l, ray| {
                             let tri = bvh.trace1_from_terms::<false, K, CONS>(ray, qs.lane(l), bvh.root, stack);
                             let tri = tri.map(|h| bvh.hit_record(&h));
-                            if spheres.is_empty() {
+                            if spheres.is_empty() && solids.is_empty() {
                                 return tri.map(|h| (h.t, h));
                             }
                             let bounded = Ray { tfar: tri.map_or(ray.tfar, |h| h.t), ..*ray };
                             let sphere = spheres.trace1_on::<false, CONS>(&bounded, stack).map(|h| pl.sphere_hit(h));
-                            sphere.or(tri).map(|h| (h.t, h))
+                            let near = sphere.or(tri);
+                            let bounded = Ray { tfar: near.map_or(ray.tfar, |h| h.t), ..*ray };
+                            let solid = solids.trace1_on::<false, CONS>(&bounded, stack).map(|h| pl.sphere_hit(h));
+                            solid.or(near).map(|h| (h.t, h))
                         },
                         |l, h| out.set(l, &self.world_hit(k as u32, &h)),
                     );
                     continue;
                 }
-                // The object's triangles, then its spheres bounded by the triangles' hits.
-                for part in 0..2 {
+                // The object's triangles, then its spheres and its solids, each bounded by the
+                // hits before.
+                for part in 0..3 {
                     let mask = if part == 0 {
                         bvh.trace_packet_with::<ANY, K, CONS>(&q, &mut r, stack)
-                    } else if spheres.is_empty() {
+                    } else if (part == 1 && spheres.is_empty()) || (part == 2 && solids.is_empty()) {
                         0
                     } else {
                         let bounded = RayPacket { tfar: tfar.to_array(), ..q };
-                        let m = spheres.trace_packet_on::<ANY, CONS>(&bounded, &mut r, stack);
+                        let m = if part == 1 {
+                            spheres.trace_packet_on::<ANY, CONS>(&bounded, &mut r, stack)
+                        } else {
+                            solids.trace_packet_on::<ANY, CONS>(&bounded, &mut r, stack)
+                        };
                         if pl.mirror {
                             for l in 0..r.t.len() {
                                 (r.ng_x[l], r.ng_y[l], r.ng_z[l]) = (-r.ng_x[l], -r.ng_y[l], -r.ng_z[l]);
@@ -682,9 +703,13 @@ fn placed_box(object: &Scene, m: &Affine3A) -> Option<Aabb> {
             }
         }
     }
-    let (bvh, spheres) = (object.bvh(), object.sphere_tree());
+    let (bvh, spheres, solids) = (object.bvh(), object.sphere_tree(), object.solid_tree());
     let mut out = Aabb::EMPTY;
-    for (nodes, root, bounds) in [(&bvh.nodes, bvh.root, bvh.bounds), (&spheres.nodes, spheres.root, spheres.bounds)] {
+    for (nodes, root, bounds) in [
+        (&bvh.nodes, bvh.root, bvh.bounds),
+        (&spheres.nodes, spheres.root, spheres.bounds),
+        (&solids.nodes, solids.root, solids.bounds),
+    ] {
         if let Some((lo, hi)) = bounds {
             grow(nodes, m, root, lo, hi, PLACED_BOX_LEVELS, &mut out);
         }

@@ -21,13 +21,16 @@ use crate::geometry::TriangleTest;
 use crate::geometry::triangle::{BLOCK, TriBlock};
 use crate::instance::{Instance, InstancedScene};
 use crate::scene::Scene;
-use crate::shapes::{SphereSet, SphereTest};
+use crate::shapes::{CsgOp, MAX_SOLID_DEPTH, Primitive, QuarticSolver, Solid, SphereSet, SphereTest};
 
 /// The first bytes of a serialized scene.
 const MAGIC: &[u8; 8] = b"STRAHLSC";
 /// Format version; bumped whenever the layout of nodes, blocks or this format changes. Version 2
-/// appends the sphere sets (their tree is rebuilt on reading); version 1 bytes still read.
-const VERSION: u32 = 2;
+/// appends the sphere sets (their tree is rebuilt on reading), version 3 the solids (likewise);
+/// version 1 and 2 bytes still read.
+const VERSION: u32 = 3;
+/// Deepest solid tree the reader accepts (the builder's own limit, [`MAX_SOLID_DEPTH`]).
+const MAX_SOLID_READ_DEPTH: usize = MAX_SOLID_DEPTH;
 /// Deepest wide level a built tree reaches (`MEDIAN_DEPTH` SAH levels, then at most 32 median
 /// levels), which the traversal stack is sized for.
 const MAX_DEPTH: usize = MEDIAN_DEPTH + 33;
@@ -97,6 +100,12 @@ impl Scene {
                 [c.x, c.y, c.z, rad].iter().for_each(|&x| w.f32(x));
             }
         }
+        // Version 3: the solids and their quartic solver; the solid tree is rebuilt on reading.
+        w.u8(QuarticSolver::ALL.iter().position(|&q| q == self.quartic_solver()).unwrap_or(0) as u8);
+        w.u64(self.solids().len() as u64);
+        for solid in self.solids() {
+            write_solid(&mut w, solid);
+        }
         w.0
     }
 
@@ -109,7 +118,7 @@ impl Scene {
             return Err(bad("not a serialized strahl scene (no STRAHLSC header)"));
         }
         let version = r.u32()?;
-        if version != VERSION && version != 1 {
+        if !(1..=VERSION).contains(&version) {
             return Err(bad(format!("format version {version}; this strahl reads version {VERSION}")));
         }
         let test = match r.u8()? {
@@ -207,6 +216,17 @@ impl Scene {
                 spheres.push(SphereSet::from_pairs(name, &pairs)?);
             }
         }
+        let mut quartic_solver = QuarticSolver::default();
+        let mut solids = Vec::new();
+        if version >= 3 {
+            let code = r.u8()? as usize;
+            quartic_solver =
+                *QuarticSolver::ALL.get(code).ok_or_else(|| bad(format!("unknown quartic solver {code}")))?;
+            let n = r.count(2)?;
+            for _ in 0..n {
+                solids.push(read_solid(&mut r, 0)?);
+            }
+        }
         if !r.b.is_empty() {
             return Err(bad(format!("{} bytes after the scene", r.b.len())));
         }
@@ -219,7 +239,113 @@ impl Scene {
         check_tree(&nodes, blocks.len(), root)?;
         check_blocks(&blocks, test, &meshes)?;
         let bvh = Bvh { nodes, blocks, root, bounds, test, box_test, stats, prefetch };
-        Scene::from_parts(meshes, bvh, spheres, Vec::new(), BuildConfig { sphere_test, ..BuildConfig::default() })
+        Scene::from_parts(
+            meshes,
+            bvh,
+            spheres,
+            solids,
+            BuildConfig { sphere_test, quartic_solver, ..BuildConfig::default() },
+        )
+    }
+}
+
+/// Writes a solid tree: a tag (0 primitive, 1 transformed, 2 CSG), then the primitive's kind
+/// and ten parameters, the 3×4 matrix (columns) and the child, or the operation and operands.
+fn write_solid(w: &mut Writer, s: &Solid) {
+    match s {
+        Solid::Primitive(p) => {
+            w.u8(0);
+            let (kind, params) = primitive_code(p);
+            w.u8(kind);
+            params.iter().for_each(|&x| w.f32(x));
+        }
+        Solid::Transformed(m, inner) => {
+            w.u8(1);
+            m.to_cols_array().iter().for_each(|&x| w.f32(x));
+            write_solid(w, inner);
+        }
+        Solid::Csg(op, operands) => {
+            w.u8(2);
+            w.u8(match op {
+                CsgOp::Union => 0,
+                CsgOp::Intersection => 1,
+                CsgOp::Difference => 2,
+            });
+            w.u64(operands.len() as u64);
+            operands.iter().for_each(|o| write_solid(w, o));
+        }
+    }
+}
+
+/// A primitive's kind code and parameters (unused ones 0).
+fn primitive_code(p: &Primitive) -> (u8, [f32; 10]) {
+    let mut a = [0.0; 10];
+    let kind = match *p {
+        Primitive::Sphere => 0,
+        Primitive::Box => 1,
+        Primitive::Cylinder => 2,
+        Primitive::Cone { r0, r1 } => {
+            a[..2].copy_from_slice(&[r0, r1]);
+            3
+        }
+        Primitive::Disc => 4,
+        Primitive::Plane => 5,
+        Primitive::Torus { major, minor } => {
+            a[..2].copy_from_slice(&[major, minor]);
+            6
+        }
+        Primitive::Quadric { coeffs } => {
+            a = coeffs;
+            7
+        }
+    };
+    (kind, a)
+}
+
+/// Reads what [`write_solid`] wrote, `depth` levels down.
+fn read_solid(r: &mut Reader, depth: usize) -> Result<Solid> {
+    if depth > MAX_SOLID_READ_DEPTH {
+        return Err(bad(format!("a solid deeper than {MAX_SOLID_READ_DEPTH} levels")));
+    }
+    match r.u8()? {
+        0 => {
+            let kind = r.u8()?;
+            let mut a = [0.0f32; 10];
+            for x in &mut a {
+                *x = r.f32()?;
+            }
+            Ok(Solid::Primitive(match kind {
+                0 => Primitive::Sphere,
+                1 => Primitive::Box,
+                2 => Primitive::Cylinder,
+                3 => Primitive::Cone { r0: a[0], r1: a[1] },
+                4 => Primitive::Disc,
+                5 => Primitive::Plane,
+                6 => Primitive::Torus { major: a[0], minor: a[1] },
+                7 => Primitive::Quadric { coeffs: a },
+                k => return Err(bad(format!("unknown primitive kind {k}"))),
+            }))
+        }
+        1 => {
+            let mut m = [0.0f32; 12];
+            for x in &mut m {
+                *x = r.f32()?;
+            }
+            let inner = read_solid(r, depth + 1)?;
+            Ok(Solid::Transformed(Affine3A::from_cols_array(&m), Box::new(inner)))
+        }
+        2 => {
+            let op = match r.u8()? {
+                0 => CsgOp::Union,
+                1 => CsgOp::Intersection,
+                2 => CsgOp::Difference,
+                k => return Err(bad(format!("unknown CSG operation {k}"))),
+            };
+            let n = r.count(2)?;
+            let operands = (0..n).map(|_| read_solid(r, depth + 1)).collect::<Result<Vec<_>>>()?;
+            Ok(Solid::Csg(op, operands))
+        }
+        t => Err(bad(format!("unknown solid tag {t}"))),
     }
 }
 
@@ -256,7 +382,8 @@ impl InstancedScene {
             return Err(bad("not a serialized strahl two-level scene (no STRAHLIN header)"));
         }
         let version = r.u32()?;
-        if version != VERSION {
+        // The two-level layout has not changed since version 1; the objects carry their own.
+        if !(1..=VERSION).contains(&version) {
             return Err(bad(format!("format version {version}; this strahl reads version {VERSION}")));
         }
         let n = r.count(8)?;
@@ -452,8 +579,9 @@ mod tests {
             // for 2^56 bytes of capacity): refused.
             let mut figure = bytes.clone();
             // The figure sits 24 bytes before the statistics' end, which the sphere section
-            // (test code and a zero set count: 9 bytes) follows.
-            let at = figure.len() - 24 - 9;
+            // (test code and a zero set count: 9 bytes) and the solid section (solver code and a
+            // zero count: 9 bytes) follow.
+            let at = figure.len() - 24 - 9 - 9;
             figure[at + 6] = 0xf7;
             assert!(matches!(Scene::from_bytes(&figure), Err(Error::Serialized(m)) if m.contains("statistics")));
         }

@@ -17,7 +17,7 @@ use crate::geometry::{TriangleMesh, load_obj};
 use crate::ray::{Hit, HitPacket, HitSlice, HitStream, PACKET_WIDTH, Ray, RayPacket, RayStream};
 use crate::shapes::solid_tree::SolidBvh;
 use crate::shapes::tree::SphereBvh;
-use crate::shapes::{Solid, SphereSet, SphereTest};
+use crate::shapes::{QuarticSolver, Solid, SphereSet, SphereTest};
 
 /// How a stream query groups its rays.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -116,6 +116,11 @@ impl Scene {
     /// The solids (geometry ids from `meshes().len() + spheres().len()` on).
     pub fn solids(&self) -> &[Solid] {
         &self.solids
+    }
+
+    /// The quartic solver the scene's tori are intersected with.
+    pub fn quartic_solver(&self) -> QuarticSolver {
+        self.solid_tree.solver
     }
 
     /// The solid tree's build statistics (`shapes` solids; all zero without solids).

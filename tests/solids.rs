@@ -280,3 +280,80 @@ fn bad_solids_are_typed_errors() {
         assert!(ok.intersect(&r).is_none() && !ok.occluded(&r));
     }
 }
+
+#[test]
+fn instanced_solids_match_their_flattened_twin() {
+    use strahl::{Instance, InstancedScene};
+    let object = Scene::build_with_solids(Vec::new(), Vec::new(), gallery(), &BuildConfig::default()).unwrap();
+    let instances = vec![
+        Instance::new(0, Affine3A::IDENTITY),
+        // Non-uniform scale, turn and a mirror: solids take any invertible affine map.
+        Instance::new(
+            0,
+            Affine3A::from_scale_rotation_translation(
+                Vec3::new(-0.7, 1.3, 0.9),
+                Quat::from_rotation_y(0.8),
+                Vec3::new(15.0, 1.0, -2.0),
+            ),
+        ),
+    ];
+    let inst = InstancedScene::from_scenes(vec![object], instances).unwrap();
+    let flat = inst.flatten(&BuildConfig::default()).unwrap();
+    let mut rng = Rng(21);
+    let mut hits = 0;
+    let rays: Vec<Ray> = (0..4000)
+        .map(|_| {
+            let o = Vec3::new(7.0, 0.0, 0.0) + rng.vec(1.0).normalize() * 25.0;
+            let target = Vec3::new(rng.range(-5.0, 20.0), rng.range(-5.0, 5.0), rng.range(-7.0, 5.0));
+            Ray::new(o, target - o)
+        })
+        .collect();
+    for r in &rays {
+        let (a, b) = (inst.intersect(r), flat.intersect(r));
+        assert_eq!(a.is_some(), b.is_some(), "{r:?} {a:?} {b:?}");
+        if let (Some(a), Some(b)) = (a, b) {
+            hits += 1;
+            assert!((a.t - b.t).abs() <= 1e-5 * a.t, "{a:?} {b:?}");
+            assert!(a.ng.normalize().dot(b.ng.normalize()) > 0.9999, "{a:?} {b:?}");
+        }
+        assert_eq!(inst.occluded(r), flat.occluded(r));
+    }
+    assert!(hits > 500, "{hits}");
+    for chunk in rays.chunks(16) {
+        let p = RayPacket::from_rays(chunk);
+        inst.intersect_packet_each(&p, |l, h| {
+            let want = flat.intersect(&chunk[l]).unwrap();
+            assert!((h.t - want.t).abs() <= 1e-5 * h.t);
+        });
+        let want = chunk.iter().enumerate().fold(0u32, |m, (l, r)| m | (flat.occluded(r) as u32) << l);
+        assert_eq!(inst.occluded_packet(&p), want);
+    }
+}
+
+#[test]
+fn solids_survive_serialization() {
+    let cfg = BuildConfig { quartic_solver: QuarticSolver::Ferrari, ..BuildConfig::default() };
+    let scene = Scene::build_with_solids(Vec::new(), Vec::new(), gallery(), &cfg).unwrap();
+    let bytes = scene.to_bytes();
+    let back = Scene::from_bytes(&bytes).unwrap();
+    assert_eq!(back.solids(), scene.solids());
+    assert_eq!(back.quartic_solver(), QuarticSolver::Ferrari);
+    assert_eq!(back.to_bytes(), bytes);
+    for r in rays(2000, 17) {
+        assert_eq!(back.intersect(&r), scene.intersect(&r));
+    }
+    // Truncated or damaged bytes are errors, never panics.
+    for cut in (bytes.len() - 400..bytes.len()).step_by(7) {
+        assert!(Scene::from_bytes(&bytes[..cut]).is_err());
+    }
+    // A solid nested too deep is refused when built, and when read back.
+    let mut deep = Solid::new(Primitive::Box);
+    for _ in 0..300 {
+        deep = Solid::union(vec![deep]);
+    }
+    assert!(matches!(
+        Scene::build_with_solids(Vec::new(), Vec::new(), vec![deep.clone()], &BuildConfig::default()),
+        Err(Error::BadSolid { index: 0, .. })
+    ));
+    assert!(!deep.contains(Vec3::ZERO));
+}

@@ -45,7 +45,8 @@ fuzz_target!(|data: &[u8]| {
             exercise(&s, s.bounds());
         }
     } else if let Ok(s) = Scene::from_bytes(data) {
-        // Version 1 bytes (no sphere section) are read and written back as version 2.
+        // Version 1 and 2 bytes (no sphere or solid section) are read and written back as the
+        // current version.
         let once = s.to_bytes();
         if data.get(8..12) == Some(&once[8..12]) {
             assert_eq!(once, data, "a loaded scene writes back its bytes");

@@ -96,6 +96,9 @@ impl InstancedScene {
                 self.objects()[object as usize].sphere_tree().each_hit_on::<CONS>(&r, stack, &mut |h| {
                     f(&self.world_sphere_hit_of(k as u32, h));
                 });
+                self.objects()[object as usize].solid_tree().each_hit_on::<CONS>(&r, stack, &mut |h| {
+                    f(&self.world_sphere_hit_of(k as u32, h));
+                });
             }
             false
         });

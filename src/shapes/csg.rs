@@ -69,21 +69,24 @@ impl Solid {
 
     /// Whether the world point `p` lies inside (boundaries included): point membership,
     /// evaluated on the tree directly, in float64 (the reference the interval method is tested
-    /// against). A disc contains nothing.
+    /// against). A disc contains nothing; so does a tree deeper than [`MAX_SOLID_DEPTH`], which
+    /// no scene accepts.
     pub fn contains(&self, p: Vec3) -> bool {
-        self.contains_f64(DVec3::from(p.to_array().map(f64::from)))
+        self.contains_f64(DVec3::from(p.to_array().map(f64::from)), 0)
     }
 
-    fn contains_f64(&self, p: DVec3) -> bool {
+    fn contains_f64(&self, p: DVec3, depth: usize) -> bool {
+        if depth > MAX_SOLID_DEPTH {
+            return false;
+        }
+        let inside = |s: &Solid| s.contains_f64(p, depth + 1);
         match self {
             Solid::Primitive(prim) => prim.contains(p),
-            Solid::Transformed(m, s) => s.contains_f64(to_f64(m).inverse().transform_point3(p)),
+            Solid::Transformed(m, s) => s.contains_f64(to_f64(m).inverse().transform_point3(p), depth + 1),
             Solid::Csg(op, ops) => match op {
-                CsgOp::Union => ops.iter().any(|s| s.contains_f64(p)),
-                CsgOp::Intersection => ops.iter().all(|s| s.contains_f64(p)),
-                CsgOp::Difference => {
-                    ops.first().is_some_and(|s| s.contains_f64(p)) && !ops[1..].iter().any(|s| s.contains_f64(p))
-                }
+                CsgOp::Union => ops.iter().any(inside),
+                CsgOp::Intersection => ops.iter().all(inside),
+                CsgOp::Difference => ops.first().is_some_and(inside) && !ops[1..].iter().any(inside),
             },
         }
     }
@@ -129,6 +132,10 @@ pub(crate) struct CompiledSolid {
 /// Most leaves one solid may have (leaf indices are 16-bit).
 pub const MAX_LEAVES: usize = u16::MAX as usize;
 
+/// Deepest solid tree a scene accepts (levels of transforms and CSG operations): the recursive
+/// checks stay far from the stack's end.
+pub const MAX_SOLID_DEPTH: usize = 256;
+
 /// Relative thickness below which CSG spans and gaps are dropped (of the solid's diagonal).
 pub const CSG_TOLERANCE: f64 = 1e-6;
 
@@ -144,7 +151,7 @@ impl CompiledSolid {
             tolerance: 0.0,
             solver,
         };
-        let b = c.flatten(solid, DAffine3::IDENTITY, false)?;
+        let b = c.flatten(solid, DAffine3::IDENTITY, false, 0)?;
         let Some((lo, hi)) = b else {
             return Err("the solid is unbounded: intersect its plane or quadric with a bounded solid".into());
         };
@@ -166,7 +173,10 @@ impl CompiledSolid {
     }
 
     /// Appends `s`'s program (placed by `m`, object to world); returns its world bounds.
-    fn flatten(&mut self, s: &Solid, m: DAffine3, in_csg: bool) -> Result<Bounds, String> {
+    fn flatten(&mut self, s: &Solid, m: DAffine3, in_csg: bool, depth: usize) -> Result<Bounds, String> {
+        if depth > MAX_SOLID_DEPTH {
+            return Err(format!("the tree is deeper than {MAX_SOLID_DEPTH} levels"));
+        }
         match s {
             Solid::Primitive(p) => {
                 if let Some(why) = p.check() {
@@ -192,7 +202,7 @@ impl CompiledSolid {
                 if !t.is_finite() || !det.is_normal() || !t.inverse().is_finite() {
                     return Err(format!("transform {t:?} is not finite and invertible"));
                 }
-                self.flatten(inner, m * t, in_csg)
+                self.flatten(inner, m * t, in_csg, depth + 1)
             }
             Solid::Csg(op, operands) => {
                 if operands.is_empty() {
@@ -203,7 +213,7 @@ impl CompiledSolid {
                 }
                 let mut acc: Option<Bounds> = None;
                 for (i, o) in operands.iter().enumerate() {
-                    let b = self.flatten(o, m, true)?;
+                    let b = self.flatten(o, m, true, depth + 1)?;
                     acc = Some(match (acc, op) {
                         (None, _) => b,
                         (Some(a), CsgOp::Union) => a.zip(b).map(|(a, b)| (a.0.min(b.0), a.1.max(b.1))),

@@ -10,6 +10,7 @@ use glam::{Vec3, Vec3A};
 use super::Solid;
 use super::csg::CompiledSolid;
 use super::primitive::Bound;
+use super::solve::QuarticSolver;
 use crate::bvh::build::{self, Aabb, PrimRef};
 use crate::bvh::node::{EMPTY, Node, leaf_blocks};
 use crate::bvh::traverse::{BoxRay, SlabTerms, Stack, Tree, walk1, with_stack};
@@ -21,14 +22,15 @@ use crate::ray::{Hit, HitPacket, INVALID_ID, PACKET_WIDTH, Ray, RayPacket};
 /// A built BVH over solids.
 #[derive(Clone, Debug)]
 pub(crate) struct SolidBvh {
-    nodes: Vec<Node>,
+    pub nodes: Vec<Node>,
     /// Solid indices per leaf block, `u32::MAX` past the end.
     blocks: Vec<[u32; BLOCK]>,
     pub solids: Vec<CompiledSolid>,
-    root: u32,
+    pub root: u32,
     pub bounds: Option<(Vec3, Vec3)>,
     box_test: BoxTest,
     geom_base: u32,
+    pub solver: QuarticSolver,
     pub stats: BuildStats,
 }
 
@@ -43,6 +45,7 @@ impl SolidBvh {
             bounds: None,
             box_test: BoxTest::default(),
             geom_base: 0,
+            solver: QuarticSolver::default(),
             stats: BuildStats::default(),
         }
     }
@@ -57,7 +60,7 @@ impl SolidBvh {
     pub fn build(solids: &[Solid], geom_base: usize, cfg: &BuildConfig) -> Result<Self> {
         let start = Instant::now();
         if solids.is_empty() {
-            return Ok(Self::empty());
+            return Ok(Self { solver: cfg.quartic_solver, ..Self::empty() });
         }
         if geom_base + solids.len() >= u32::MAX as usize {
             return Err(Error::TooManyGeometries(geom_base + solids.len()));
@@ -112,6 +115,7 @@ impl SolidBvh {
             bounds,
             box_test: cfg.box_test,
             geom_base: geom_base as u32,
+            solver: cfg.quartic_solver,
             stats,
         })
     }
@@ -186,6 +190,33 @@ impl SolidBvh {
             let l = bits.trailing_zeros() as usize;
             bits &= bits - 1;
             if let Some(h) = self.trace1::<ANY>(&p.get(l)) {
+                mask |= 1 << l;
+                hit.set(l, Some(h));
+            }
+        }
+        mask
+    }
+
+    /// [`trace_packet`](Self::trace_packet) on `stack` above its entries, the box test chosen
+    /// by the caller: an instance's object walk. Lanes whose object-space rays are not valid
+    /// miss.
+    pub(crate) fn trace_packet_on<const ANY: bool, const CONS: bool>(
+        &self,
+        p: &RayPacket,
+        hit: &mut HitPacket,
+        stack: &mut Stack,
+    ) -> u32 {
+        *hit = HitPacket::default();
+        let mut mask = 0;
+        let mut bits = p.active & crate::simd::low_bits(PACKET_WIDTH);
+        while bits != 0 {
+            let l = bits.trailing_zeros() as usize;
+            bits &= bits - 1;
+            let ray = p.get(l);
+            if !ray.is_valid() {
+                continue;
+            }
+            if let Some(h) = self.trace1_on::<ANY, CONS>(&ray.clamped_to_zero(), stack) {
                 mask |= 1 << l;
                 hit.set(l, Some(h));
             }

@@ -21,6 +21,19 @@ pub enum QuarticSolver {
     Bracketed,
 }
 
+impl QuarticSolver {
+    /// Every solver.
+    pub const ALL: [QuarticSolver; 2] = [QuarticSolver::Ferrari, QuarticSolver::Bracketed];
+
+    /// The solver's name, as the harness and scene files spell it.
+    pub fn name(self) -> &'static str {
+        match self {
+            QuarticSolver::Ferrari => "ferrari",
+            QuarticSolver::Bracketed => "bracketed",
+        }
+    }
+}
+
 /// Maximum Newton or bisection steps per bracketed root: 64 halvings of an f64 bracket reach its
 /// last bit, so no input can loop longer.
 const MAX_STEPS: usize = 64;
