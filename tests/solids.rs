@@ -357,3 +357,34 @@ fn solids_survive_serialization() {
     ));
     assert!(!deep.contains(Vec3::ZERO));
 }
+
+#[test]
+fn rays_from_inside_always_find_the_way_out() {
+    let wedge = Solid::intersection(vec![
+        Solid::new(Primitive::Box).transformed(Affine3A::from_scale_rotation_translation(
+            Vec3::splat(0.6),
+            Quat::IDENTITY,
+            Vec3::new(1.9, 0.6, -1.6),
+        )),
+        Solid::new(Primitive::Plane).transformed(Affine3A::from_rotation_translation(
+            Quat::from_rotation_arc(Vec3::Z, Vec3::new(1.0, 1.0, 0.0).normalize()),
+            Vec3::new(1.9, 0.0, -1.6) + Vec3::new(1.0, 1.0, 0.0).normalize() * (0.9 / 2f32.sqrt()),
+        )),
+    ]);
+    let scene = scene_of(vec![wedge.clone()], QuarticSolver::Bracketed);
+    let mut rng = Rng(8);
+    let mut lost = 0;
+    let mut tried = 0;
+    for _ in 0..100_000 {
+        let p = Vec3::new(1.9, 0.6, -1.6) + rng.vec(0.6);
+        if !wedge.contains(p) {
+            continue;
+        }
+        tried += 1;
+        if scene.intersect(&Ray::new(p, rng.vec(1.0))).is_none() {
+            lost += 1;
+        }
+    }
+    assert!(tried > 10_000);
+    assert_eq!(lost, 0, "{lost} of {tried} rays from inside hit nothing");
+}

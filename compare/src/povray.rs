@@ -9,7 +9,10 @@
 //!   `right`/`up` spanning the window;
 //! - meshes → `mesh2` (with `normal_vectors` where strahl shades smooth), one object per instance
 //!   and geometry with its `matrix` and texture; analytic sphere sets → a `union` of `sphere`s
-//!   per set, placed the same way;
+//!   per set, placed the same way; solids → POV-Ray's own CSG (`union`, `intersection`,
+//!   `difference`) over its own primitives in their canonical forms (`sphere`, `box`,
+//!   `cylinder`, `cone`, `disc`, `plane`, `torus`, `quadric`), each placed by its `matrix`, with a
+//!   texture per primitive where a solid's primitives differ in material;
 //! - material: `pigment rgb diffuse`, `finish { ambient a·1 diffuse 1 phong ks phong_size n
 //!   reflection r }`; transparent: `pigment rgbf <transmit, 1>` with `interior { ior }` and, with
 //!   Fresnel on, `reflection { 0, 1 fresnel on } conserve_energy`; absorption α →
@@ -72,6 +75,52 @@ fn material_sdl(m: &Material) -> String {
         s.push_str(" }");
     }
     s
+}
+
+/// A solid as POV-Ray SDL: CSG over canonical primitives, each transform an `object { … matrix }`
+/// wrapper; `textures` gives each leaf's texture in leaf order (empty strings where the whole
+/// object gets one).
+fn solid_sdl(solid: &strahl::Solid, textures: &mut std::slice::Iter<'_, String>, out: &mut String) {
+    use strahl::{CsgOp, Primitive, Solid};
+    match solid {
+        Solid::Primitive(p) => {
+            let body = match *p {
+                Primitive::Sphere => "sphere { 0, 1".to_string(),
+                Primitive::Box => "box { -1, 1".to_string(),
+                Primitive::Cylinder => "cylinder { <0, 0, 0>, <0, 0, 1>, 1".to_string(),
+                Primitive::Cone { r0, r1 } => format!("cone {{ <0, 0, 0>, {r0}, <0, 0, 1>, {r1}"),
+                Primitive::Disc => "disc { <0, 0, 0>, <0, 0, 1>, 1".to_string(),
+                Primitive::Plane => "plane { z, 0".to_string(),
+                Primitive::Torus { major, minor } => format!("torus {{ {major}, {minor}"),
+                Primitive::Quadric { coeffs: c } => format!(
+                    "quadric {{ <{}, {}, {}>, <{}, {}, {}>, <{}, {}, {}>, {}",
+                    c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7], c[8], c[9]
+                ),
+            };
+            let tex = textures.next().map_or("", |t| t.as_str());
+            write!(out, "{body} {tex} }}").unwrap();
+        }
+        Solid::Transformed(m, inner) => {
+            out.push_str("object { ");
+            solid_sdl(inner, textures, out);
+            let matrix = crate::harness::column_major(m).map(|x| x.to_string()).join(", ");
+            write!(out, " matrix <{matrix}> }}").unwrap();
+        }
+        Solid::Csg(op, operands) => {
+            let kind = match (op, operands.len()) {
+                (_, 1) => "object",
+                (CsgOp::Union, _) => "union",
+                (CsgOp::Intersection, _) => "intersection",
+                (CsgOp::Difference, _) => "difference",
+            };
+            write!(out, "{kind} {{ ").unwrap();
+            for o in operands {
+                solid_sdl(o, textures, out);
+                out.push(' ');
+            }
+            out.push('}');
+        }
+    }
 }
 
 fn mesh_sdl(name: &str, m: &TriangleMesh, smooth: bool) -> String {
@@ -223,6 +272,21 @@ pub fn export(file: &SceneFile, objects: &[Vec<TriangleMesh>], settings: &Settin
             let mat = file.instance_materials[i].unwrap_or(sh.material);
             let material = &file.materials[mat as usize].1;
             writeln!(s, "object {{ S{}_{k} {} {matrix} }}", inst.object, material_sdl(material))?;
+        }
+        if let strahl::scene_file::MeshSource::Solid(solid) = &file.meshes[inst.object].1 {
+            // One texture for the whole where the instance names one or every primitive has the
+            // same material (POV-Ray's CSG keeps one interior, for glass); else one per primitive.
+            let leaves = &sh.leaf_materials;
+            let whole =
+                file.instance_materials[i].or_else(|| leaves.iter().all(|&l| l == leaves[0]).then_some(leaves[0]));
+            let textures: Vec<String> = match whole {
+                Some(_) => vec![String::new(); leaves.len()],
+                None => leaves.iter().map(|&l| material_sdl(&file.materials[l as usize].1)).collect(),
+            };
+            let mut body = String::new();
+            solid_sdl(solid, &mut textures.iter(), &mut body);
+            let tex = whole.map_or(String::new(), |m| material_sdl(&file.materials[m as usize].1));
+            writeln!(s, "object {{ {body} {tex} {matrix} }}")?;
         }
     }
     Ok(s)

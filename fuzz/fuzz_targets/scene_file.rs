@@ -20,6 +20,7 @@ fuzz_target!(|data: &[u8]| {
             MeshSource::Sphere { stacks, slices, .. } => stacks <= 64 && slices <= 64,
             MeshSource::AnalyticSphere { .. } => true,
             MeshSource::AnalyticSphereflake { levels } => levels <= 3,
+            MeshSource::Solid(_) => true,
         });
     if !small {
         return;

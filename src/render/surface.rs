@@ -21,6 +21,8 @@ struct Geometry {
     material: u32,
     /// For an analytic sphere set (no triangles): its number of spheres.
     spheres: usize,
+    /// For a solid (no triangles): the material of each primitive (by `prim_id`).
+    solid: Option<Vec<u32>>,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -88,6 +90,7 @@ impl Surfaces {
                         uvs: None,
                         material,
                         spheres: 0,
+                        solid: None,
                     })
                     .collect()
             })
@@ -116,6 +119,25 @@ impl Surfaces {
             uvs: None,
             material,
             spheres: count,
+            solid: None,
+        });
+        true
+    }
+
+    /// Appends a solid whose primitives have `leaf_materials` (by `prim_id`) as the next
+    /// geometry of object `object` (after its meshes and sphere sets, as scenes number them);
+    /// `false` if there is no such object or the list is empty.
+    pub fn add_solid(&mut self, object: usize, leaf_materials: Vec<u32>) -> bool {
+        let Some(o) = self.objects.get_mut(object) else { return false };
+        let Some(&material) = leaf_materials.first() else { return false };
+        o.push(Geometry {
+            positions: Vec::new(),
+            indices: Vec::new(),
+            normals: None,
+            uvs: None,
+            material,
+            spheres: 0,
+            solid: Some(leaf_materials),
         });
         true
     }
@@ -134,7 +156,7 @@ impl Surfaces {
 
     /// Materials referenced, for checking against the material table.
     pub fn max_material(&self) -> Option<u32> {
-        let meshes = self.objects.iter().flatten().map(|g| g.material);
+        let meshes = self.objects.iter().flatten().flat_map(|g| g.solid.iter().flatten().copied().chain([g.material]));
         meshes.chain(self.placements.iter().filter_map(|p| p.material)).max()
     }
 
@@ -148,17 +170,19 @@ impl Surfaces {
             (p.object as usize, Some(p))
         };
         let g = self.objects.get(object)?.get(hit.geom_id as usize)?;
-        if g.spheres > 0 {
-            // A sphere: the point along the ray, the query's outward normal (already in world
-            // space) for both normals, no texture coordinates.
-            if hit.prim_id as usize >= g.spheres {
-                return None;
-            }
+        if g.spheres > 0 || g.solid.is_some() {
+            // A sphere or a solid: the point along the ray, the query's outward normal (already
+            // in world space) for both normals, no texture coordinates.
+            let leaf_material = match &g.solid {
+                Some(m) => *m.get(hit.prim_id as usize)?,
+                None if hit.prim_id as usize >= g.spheres => return None,
+                None => g.material,
+            };
             let mut ng = hit.ng.normalize_or_zero();
             if ng == Vec3::ZERO || !ng.is_finite() {
                 ng = -ray.dir.normalize_or_zero();
             }
-            let material = placement.and_then(|p| p.material).unwrap_or(g.material);
+            let material = placement.and_then(|p| p.material).unwrap_or(leaf_material);
             return Some(SurfacePoint { p: ray.at(hit.t), ng, ns: ng, uv: None, material });
         }
         let tri = g.indices.get(hit.prim_id as usize)?;

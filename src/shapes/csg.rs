@@ -67,6 +67,12 @@ impl Solid {
         Solid::Csg(CsgOp::Difference, operands)
     }
 
+    /// Checks the solid as a scene would when building it: `Err` says what is wrong (see
+    /// [`Error::BadSolid`](crate::Error::BadSolid)).
+    pub fn check(&self) -> Result<(), String> {
+        CompiledSolid::new(self, QuarticSolver::default()).map(|_| ())
+    }
+
     /// Whether the world point `p` lies inside (boundaries included): point membership,
     /// evaluated on the tree directly, in float64 (the reference the interval method is tested
     /// against). A disc contains nothing; so does a tree deeper than [`MAX_SOLID_DEPTH`], which

@@ -50,6 +50,8 @@ use std::path::{Path, PathBuf};
 use glam::{Affine3A, EulerRot, Mat3, Quat, Vec3};
 use serde::Deserialize;
 
+mod solid;
+
 use crate::bvh::BuildConfig;
 use crate::camera::Camera;
 use crate::error::{Error, Result};
@@ -114,6 +116,9 @@ pub struct MeshShading {
     pub smooth: bool,
     /// Materials of single geometries by OBJ object/group name, overriding `material`.
     pub groups: Vec<(String, u32)>,
+    /// A solid's materials, one per primitive in leaf order (its `prim_id`s): the nearest
+    /// `material` on the way down its tree, else `material`. Empty for other sources.
+    pub leaf_materials: Vec<u32>,
 }
 
 /// The `[render]` table: image size, sampling, recursion and environment.
@@ -182,6 +187,9 @@ pub enum MeshSource {
         /// Recursion levels (at most [`MAX_ANALYTIC_FLAKE_LEVELS`]).
         levels: u32,
     },
+    /// A solid (`solid = { … }`): primitives placed and combined by CSG (see
+    /// [`Solid`](crate::Solid)), one geometry.
+    Solid(crate::Solid),
 }
 
 /// Deepest analytic sphereflake a scene file may ask for: 4.8 million spheres.
@@ -201,8 +209,18 @@ impl MeshSource {
             }
             MeshSource::Box { min, max } => vec![procedural::cuboid(min, max)],
             MeshSource::Quad { size } => vec![procedural::quad(size[0], size[1])],
-            MeshSource::AnalyticSphere { .. } | MeshSource::AnalyticSphereflake { .. } => Vec::new(),
+            MeshSource::AnalyticSphere { .. } | MeshSource::AnalyticSphereflake { .. } | MeshSource::Solid(_) => {
+                Vec::new()
+            }
         })
+    }
+
+    /// The solids of this source (one for a `solid` mesh, none otherwise).
+    pub fn solids(&self) -> Vec<crate::Solid> {
+        match self {
+            MeshSource::Solid(s) => vec![s.clone()],
+            _ => Vec::new(),
+        }
     }
 
     /// The analytic spheres of this source (none for the triangle sources).
@@ -279,10 +297,11 @@ impl SceneFile {
                 + m.sphereflake.is_some() as u32
                 + m.sphere.is_some() as u32
                 + m.cuboid.is_some() as u32
-                + m.quad.is_some() as u32;
+                + m.quad.is_some() as u32
+                + m.solid.is_some() as u32;
             if sources != 1 {
                 return Err(err(format!(
-                    "mesh `{name}` needs exactly one of `obj`, `sphereflake`, `sphere`, `box`, `quad`"
+                    "mesh `{name}` needs exactly one of `obj`, `sphereflake`, `sphere`, `box`, `quad`, `solid`"
                 )));
             }
             let too_many = |tris: f64| {
@@ -308,7 +327,15 @@ impl SceneFile {
                     Err(err(format!("mesh `{name}`: `stacks` and `slices` do not apply to analytic spheres")))
                 }
             };
-            let source = if let Some(p) = &m.obj {
+            let mut leaf_materials = Vec::new();
+            let source = if let Some(raw) = &m.solid {
+                let (solid, names) = solid::build(raw).map_err(|e| err(format!("mesh `{name}`: {e}")))?;
+                solid.check().map_err(|e| err(format!("mesh `{name}`: the solid: {e}")))?;
+                for n in &names {
+                    leaf_materials.push(material(n, &format!("mesh `{name}`, a solid's node,"))?);
+                }
+                MeshSource::Solid(solid)
+            } else if let Some(p) = &m.obj {
                 if m.mtl == Some(true) {
                     MeshSource::ObjWithMaterials(base.join(p))
                 } else {
@@ -377,7 +404,9 @@ impl SceneFile {
                 let i = material(&Some(mat.clone()), &format!("{what}, group `{group}`,"))?.expect("named");
                 groups.push((group.clone(), i));
             }
-            mesh_shading.push(MeshShading { material: material(&m.material, &what)?.unwrap_or(0), smooth, groups });
+            let mesh_material = material(&m.material, &what)?.unwrap_or(0);
+            let leaf_materials = leaf_materials.into_iter().map(|l| l.unwrap_or(mesh_material)).collect();
+            mesh_shading.push(MeshShading { material: mesh_material, smooth, groups, leaf_materials });
             meshes.push((name.clone(), source));
         }
         let index = |mesh: &str, what: &str| {
@@ -566,24 +595,33 @@ impl SceneFile {
         self.meshes.iter().map(|(_, s)| s.sphere_sets()).collect()
     }
 
+    /// The solids of every object (one list per `[mesh.*]` table, in name order; empty for other
+    /// sources).
+    pub fn load_solids(&self) -> Vec<Vec<crate::Solid>> {
+        self.meshes.iter().map(|(_, s)| s.solids()).collect()
+    }
+
     /// Loads the meshes and spheres and builds the two-level scene.
     pub fn build(&self, config: &BuildConfig) -> Result<InstancedScene> {
         self.build_from(self.load_objects()?, config)
     }
 
     /// Builds the two-level scene from the meshes [`load_objects`](Self::load_objects) returned
-    /// and this file's analytic spheres: each object's meshes and spheres in one object scene
-    /// (geometry ids: meshes, then sphere sets), objects in parallel.
+    /// and this file's analytic spheres and solids: each object's meshes, spheres and solids in
+    /// one object scene (geometry ids: meshes, then sphere sets, then solids), objects in
+    /// parallel.
     pub fn build_from(&self, objects: Vec<Vec<TriangleMesh>>, config: &BuildConfig) -> Result<InstancedScene> {
         use rayon::prelude::*;
         let spheres = self.load_spheres()?;
-        if spheres.iter().all(|s| s.is_empty()) {
+        let solids = self.load_solids();
+        if spheres.iter().all(|s| s.is_empty()) && solids.iter().all(|s| s.is_empty()) {
             return InstancedScene::build(objects, self.instances.clone(), config);
         }
         let scenes = objects
             .into_par_iter()
             .zip(spheres)
-            .map(|(meshes, sets)| Scene::build_with_spheres(meshes, sets, config))
+            .zip(solids)
+            .map(|((meshes, sets), solids)| Scene::build_with_solids(meshes, sets, solids, config))
             .collect::<Result<Vec<Scene>>>()?;
         InstancedScene::from_scenes(scenes, self.instances.clone())
     }
@@ -658,6 +696,9 @@ impl SceneFile {
         for (o, ((_, source), sh)) in self.meshes.iter().zip(&self.mesh_shading).enumerate() {
             for set in source.sphere_sets()? {
                 surfaces.add_spheres(o, set.len(), sh.material);
+            }
+            if matches!(source, MeshSource::Solid(_)) {
+                surfaces.add_solid(o, sh.leaf_materials.clone());
             }
         }
         for (o, geoms) in per_geom.into_iter().enumerate() {
@@ -934,6 +975,7 @@ struct RawMesh {
     groups: BTreeMap<String, String>,
     mtl: Option<bool>,
     analytic: Option<bool>,
+    solid: Option<solid::RawSolid>,
 }
 
 #[derive(Deserialize)]
@@ -1024,7 +1066,7 @@ mod tests {
 
     #[test]
     fn parses_the_documented_example() {
-        let doc = include_str!("scene_file.rs");
+        let doc = include_str!("mod.rs");
         let example: String = doc
             .lines()
             .skip_while(|l| !l.starts_with("//! ```toml"))
@@ -1063,6 +1105,14 @@ mod tests {
             ("[mesh.a]\nobj = \"a.obj\"\n[[grid]]\nmesh = \"a\"\ncount = [0, 1, 1]\nspacing = [1, 1, 1]", "count"),
             ("[camera]\neye = [0, 0, 0]\nlook_at = [0, 0, 0]", "camera"),
             ("[camera\n", "TOML"),
+            ("[mesh.a]\nsolid = { box = {}, sphere = {} }", "exactly one of sphere, box"),
+            ("[mesh.a]\nsolid = { union = [] }", "union of no operands"),
+            ("[mesh.a]\nsolid = { cylinder = { cap = [0, 0, 0] } }", "cylinder needs base"),
+            ("[mesh.a]\nsolid = { torus = { major = 1.0, minor = 2.0 } }", "0 < minor < major"),
+            ("[mesh.a]\nsolid = { plane = { normal = [0, 1, 0] } }", "unbounded"),
+            ("[mesh.a]\nsolid = { box = {}, material = \"nope\" }", "no [material.nope]"),
+            ("[mesh.a]\nsolid = { union = [{ box = {} }, { disc = {} }] }", "disc is a surface"),
+            ("[mesh.a]\nsolid = { box = {}, scale = [1, 0, 1] }", "not finite and invertible"),
             ("[mesh.a]\nobj = \"a.obj\"\n[[instance]]\nmesh = \"a\"\nmatrix = [[1, 0, 0, 0], [0, 1, 0]]", "line 5"),
         ];
         for (text, needle) in cases {
