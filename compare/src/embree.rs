@@ -18,6 +18,7 @@ pub const RTC_INVALID_GEOMETRY_ID: u32 = u32::MAX;
 const RTC_GEOMETRY_TYPE_TRIANGLE: c_uint = 0;
 const RTC_GEOMETRY_TYPE_INSTANCE: c_uint = 121;
 const RTC_GEOMETRY_TYPE_SPHERE_POINT: c_uint = 50;
+const RTC_GEOMETRY_TYPE_USER: c_uint = 120;
 const RTC_BUFFER_TYPE_INDEX: c_uint = 0;
 const RTC_BUFFER_TYPE_VERTEX: c_uint = 1;
 const RTC_FORMAT_UINT3: c_uint = 0x5003;
@@ -122,6 +123,49 @@ impl RTCIntersectContext {
     }
 }
 
+/// `struct RTCBounds`.
+#[repr(C, align(16))]
+struct RTCBounds {
+    lower: [f32; 3],
+    align0: f32,
+    upper: [f32; 3],
+    align1: f32,
+}
+
+/// `struct RTCBoundsFunctionArguments`.
+#[repr(C)]
+struct RTCBoundsFunctionArguments {
+    geometryUserPtr: *mut c_void,
+    primID: c_uint,
+    timeStep: c_uint,
+    bounds_o: *mut RTCBounds,
+}
+
+/// `struct RTCIntersectFunctionNArguments`; `rayhit` is an `RTCRayHitN`: `N` lanes of each ray
+/// field, then of each hit field (`rtcore_ray.h`'s `RTCRayN_*`/`RTCHitN_*` accessors).
+#[repr(C)]
+struct RTCIntersectFunctionNArguments {
+    valid: *mut i32,
+    geometryUserPtr: *mut c_void,
+    primID: c_uint,
+    context: *mut RTCIntersectContext,
+    rayhit: *mut f32,
+    N: c_uint,
+    geomID: c_uint,
+}
+
+/// `struct RTCOccludedFunctionNArguments`; `ray` is an `RTCRayN`.
+#[repr(C)]
+struct RTCOccludedFunctionNArguments {
+    valid: *mut i32,
+    geometryUserPtr: *mut c_void,
+    primID: c_uint,
+    context: *mut RTCIntersectContext,
+    ray: *mut f32,
+    N: c_uint,
+    geomID: c_uint,
+}
+
 #[link(name = "embree3")]
 unsafe extern "C" {
     fn rtcNewDevice(config: *const c_char) -> RTCDevice;
@@ -146,6 +190,21 @@ unsafe extern "C" {
         byte_stride: usize,
         item_count: usize,
     ) -> *mut c_void;
+    fn rtcSetGeometryUserPrimitiveCount(geometry: RTCGeometry, count: c_uint);
+    fn rtcSetGeometryUserData(geometry: RTCGeometry, ptr: *mut c_void);
+    fn rtcSetGeometryBoundsFunction(
+        geometry: RTCGeometry,
+        bounds: unsafe extern "C" fn(*const RTCBoundsFunctionArguments),
+        user: *mut c_void,
+    );
+    fn rtcSetGeometryIntersectFunction(
+        geometry: RTCGeometry,
+        f: unsafe extern "C" fn(*const RTCIntersectFunctionNArguments),
+    );
+    fn rtcSetGeometryOccludedFunction(
+        geometry: RTCGeometry,
+        f: unsafe extern "C" fn(*const RTCOccludedFunctionNArguments),
+    );
     fn rtcIntersect1(scene: RTCScene, context: *mut RTCIntersectContext, rayhit: *mut RTCRayHit);
     fn rtcOccluded1(scene: RTCScene, context: *mut RTCIntersectContext, ray: *mut RTCRay);
     fn rtcIntersect16(valid: *const i32, scene: RTCScene, context: *mut RTCIntersectContext, rayhit: *mut RTCRayHit16);
@@ -221,6 +280,8 @@ pub struct Scene {
     /// Wall time of the commit (the BVH build); for instances, of all commits.
     pub build_ms: f64,
     objects: Vec<Scene>,
+    /// The solids its user geometries point to, kept alive (and unmoved: boxed) with the scene.
+    solids: Vec<Box<strahl::shapes::PreparedSolid>>,
 }
 
 // SAFETY: a committed scene is immutable; Embree documents rtcIntersect*/rtcOccluded* on a committed
@@ -232,15 +293,18 @@ unsafe impl Sync for Scene {}
 impl Scene {
     /// Builds `meshes` with the given quality; `robust` sets `RTC_SCENE_FLAG_ROBUST`.
     pub fn build(device: &Device, meshes: &[TriangleMesh], quality: Quality, robust: bool) -> anyhow::Result<Self> {
-        Self::build_mixed(device, meshes, &[], quality, robust)
+        Self::build_mixed(device, meshes, &[], &[], quality, robust)
     }
 
-    /// Builds `meshes` and then sphere sets (`RTC_GEOMETRY_TYPE_SPHERE_POINT`, geometry ids after
-    /// the meshes', as strahl numbers them) into one scene.
+    /// Builds `meshes`, then sphere sets (`RTC_GEOMETRY_TYPE_SPHERE_POINT`), then solids
+    /// (`RTC_GEOMETRY_TYPE_USER`, one primitive each, whose callbacks run strahl's own solid
+    /// intersection, [`strahl::shapes::PreparedSolid`]) into one scene, geometry ids numbered as
+    /// strahl numbers them.
     pub fn build_mixed(
         device: &Device,
         meshes: &[TriangleMesh],
         spheres: &[strahl::SphereSet],
+        solids: &[strahl::shapes::PreparedSolid],
         quality: Quality,
         robust: bool,
     ) -> anyhow::Result<Self> {
@@ -253,7 +317,7 @@ impl Scene {
                 device.check("rtcNewScene")?;
                 anyhow::bail!("rtcNewScene failed");
             }
-            let mut scene = Self { raw, build_ms: 0.0, objects: Vec::new() };
+            let mut scene = Self { raw, build_ms: 0.0, objects: Vec::new(), solids: Vec::new() };
             rtcSetSceneBuildQuality(raw, quality as c_uint);
             if robust {
                 rtcSetSceneFlags(raw, RTC_SCENE_FLAG_ROBUST);
@@ -289,6 +353,8 @@ impl Scene {
                 rtcReleaseGeometry(g);
             }
             attach_spheres(device, raw, spheres, meshes.len())?;
+            scene.solids = solids.iter().cloned().map(Box::new).collect();
+            attach_solids(device, raw, &scene.solids, meshes.len() + spheres.len())?;
             let start = Instant::now();
             rtcCommitScene(raw);
             scene.build_ms = start.elapsed().as_secs_f64() * 1e3;
@@ -301,7 +367,7 @@ impl Scene {
     /// index), each from one `RTC_FORMAT_FLOAT4` vertex buffer of `(x, y, z, radius)`: Embree's
     /// own layout for spheres, filled before the build and never touched by a timed query.
     pub fn build_spheres(device: &Device, sets: &[strahl::SphereSet], quality: Quality) -> anyhow::Result<Self> {
-        Self::build_mixed(device, &[], sets, quality, false)
+        Self::build_mixed(device, &[], sets, &[], quality, false)
     }
 
     /// Builds each object (a list of meshes) as its own scene, then a scene of instances of them:
@@ -313,22 +379,26 @@ impl Scene {
         instances: &[(usize, [f32; 12])],
         quality: Quality,
     ) -> anyhow::Result<Self> {
-        Self::build_instanced_mixed(device, objects, &[], instances, quality)
+        Self::build_instanced_mixed(device, objects, &[], &[], instances, quality)
     }
 
-    /// [`build_instanced`](Self::build_instanced) with each object's sphere sets after its meshes
-    /// (`spheres[o]`; a missing entry is no spheres).
+    /// [`build_instanced`](Self::build_instanced) with each object's sphere sets and then its
+    /// solids after its meshes (`spheres[o]`, `solids[o]`; a missing entry is none).
     pub fn build_instanced_mixed(
         device: &Device,
         objects: &[Vec<TriangleMesh>],
         spheres: &[Vec<strahl::SphereSet>],
+        solids: &[Vec<strahl::shapes::PreparedSolid>],
         instances: &[(usize, [f32; 12])],
         quality: Quality,
     ) -> anyhow::Result<Self> {
         let objects = objects
             .iter()
             .enumerate()
-            .map(|(o, m)| Self::build_mixed(device, m, spheres.get(o).map_or(&[][..], |s| s), quality, false))
+            .map(|(o, m)| {
+                let sp = spheres.get(o).map_or(&[][..], |s| s);
+                Self::build_mixed(device, m, sp, solids.get(o).map_or(&[][..], |s| s), quality, false)
+            })
             .collect::<anyhow::Result<Vec<_>>>()?;
         if let Some((i, (o, _))) = instances.iter().enumerate().find(|(_, (o, _))| *o >= objects.len()) {
             anyhow::bail!("instance {i} places object {o} of {}", objects.len());
@@ -342,7 +412,7 @@ impl Scene {
                 device.check("rtcNewScene")?;
                 anyhow::bail!("rtcNewScene failed");
             }
-            let mut scene = Self { raw, build_ms: 0.0, objects: Vec::new() };
+            let mut scene = Self { raw, build_ms: 0.0, objects: Vec::new(), solids: Vec::new() };
             rtcSetSceneBuildQuality(raw, quality as c_uint);
             for (id, (o, xfm)) in instances.iter().enumerate() {
                 let g = rtcNewGeometry(device.raw, RTC_GEOMETRY_TYPE_INSTANCE);
@@ -453,6 +523,109 @@ fn attach_spheres(device: &Device, raw: RTCScene, sets: &[strahl::SphereSet], fi
         }
     }
     Ok(())
+}
+
+/// Attaches each solid as an `RTC_GEOMETRY_TYPE_USER` geometry of one primitive with id
+/// `first_id + index`, its user pointer the boxed solid (which `Scene::solids` keeps alive and in
+/// place for the scene's life).
+fn attach_solids(
+    device: &Device,
+    raw: RTCScene,
+    solids: &[Box<strahl::shapes::PreparedSolid>],
+    first_id: usize,
+) -> anyhow::Result<()> {
+    // SAFETY: `device.raw` and `raw` are live; each geometry is checked for null; the user
+    // pointer is a `PreparedSolid` owned by the scene being built, never moved or freed before
+    // the scene is released, and only read (shared) by the callbacks.
+    unsafe {
+        for (k, solid) in solids.iter().enumerate() {
+            let g = rtcNewGeometry(device.raw, RTC_GEOMETRY_TYPE_USER);
+            if g.is_null() {
+                device.check("rtcNewGeometry")?;
+                anyhow::bail!("rtcNewGeometry(USER) failed");
+            }
+            let ptr = &**solid as *const strahl::shapes::PreparedSolid as *mut c_void;
+            rtcSetGeometryUserPrimitiveCount(g, 1);
+            rtcSetGeometryUserData(g, ptr);
+            rtcSetGeometryBoundsFunction(g, solid_bounds, std::ptr::null_mut());
+            rtcSetGeometryIntersectFunction(g, solid_intersect);
+            rtcSetGeometryOccludedFunction(g, solid_occluded);
+            rtcCommitGeometry(g);
+            rtcAttachGeometryByID(raw, g, (first_id + k) as c_uint);
+            rtcReleaseGeometry(g);
+        }
+    }
+    device.check("user geometries")
+}
+
+/// The bounds callback of a solid's user geometry.
+unsafe extern "C" fn solid_bounds(args: *const RTCBoundsFunctionArguments) {
+    // SAFETY: Embree passes valid arguments whose user pointer is the `PreparedSolid` set in
+    // `attach_solids` and whose `bounds_o` points to one writable `RTCBounds`.
+    unsafe {
+        let a = &*args;
+        let solid = &*(a.geometryUserPtr as *const strahl::shapes::PreparedSolid);
+        let (lo, hi) = solid.bounds();
+        *a.bounds_o = RTCBounds { lower: lo.to_array(), align0: 0.0, upper: hi.to_array(), align1: 0.0 };
+    }
+}
+
+/// Lane `i` of an `N`-wide SoA ray (`RTCRayN`) starting at `r`, as a strahl ray.
+///
+/// # Safety
+/// `r` must point to an `RTCRayN` of `n` lanes and `i < n`.
+unsafe fn lane_ray(r: *const f32, n: usize, i: usize) -> strahl::Ray {
+    // SAFETY: the caller's; each field block is `n` floats long, field `k` at `k·n`.
+    let f = |k: usize| unsafe { *r.add(k * n + i) };
+    strahl::Ray::segment(glam::Vec3::new(f(0), f(1), f(2)), glam::Vec3::new(f(4), f(5), f(6)), f(3), f(8))
+}
+
+/// The intersect callback: strahl's solid test per valid lane, closer hits written into the
+/// `RTCRayHitN` (`tfar`, normal, `u = v = 0`, the primitive crossed as `primID`, and the
+/// instance id from the context, as Embree's own user-geometry tutorial does).
+unsafe extern "C" fn solid_intersect(args: *const RTCIntersectFunctionNArguments) {
+    // SAFETY: Embree passes valid arguments: `valid` and `rayhit` hold `N` lanes, the user
+    // pointer is the `PreparedSolid` set in `attach_solids`, and `context` is live.
+    unsafe {
+        let a = &*args;
+        let n = a.N as usize;
+        let solid = &*(a.geometryUserPtr as *const strahl::shapes::PreparedSolid);
+        let rh = a.rayhit;
+        let hit = rh.add(12 * n);
+        let inst = (*a.context).instID[0];
+        for i in 0..n {
+            if *a.valid.add(i) == 0 {
+                continue;
+            }
+            if let Some((t, ng, leaf)) = solid.intersect(&lane_ray(rh, n, i)) {
+                *rh.add(8 * n + i) = t;
+                *hit.add(i) = ng.x;
+                *hit.add(n + i) = ng.y;
+                *hit.add(2 * n + i) = ng.z;
+                *hit.add(3 * n + i) = 0.0;
+                *hit.add(4 * n + i) = 0.0;
+                let ids = hit as *mut u32;
+                *ids.add(5 * n + i) = leaf;
+                *ids.add(6 * n + i) = a.geomID;
+                *ids.add(7 * n + i) = inst;
+            }
+        }
+    }
+}
+
+/// The occluded callback: `tfar = −inf` for each valid lane the solid occludes.
+unsafe extern "C" fn solid_occluded(args: *const RTCOccludedFunctionNArguments) {
+    // SAFETY: as for `solid_intersect`, with an `RTCRayN` of `N` lanes.
+    unsafe {
+        let a = &*args;
+        let n = a.N as usize;
+        let solid = &*(a.geometryUserPtr as *const strahl::shapes::PreparedSolid);
+        for i in 0..n {
+            if *a.valid.add(i) != 0 && solid.intersect(&lane_ray(a.ray, n, i)).is_some() {
+                *a.ray.add(8 * n + i) = f32::NEG_INFINITY;
+            }
+        }
+    }
 }
 
 impl Drop for Scene {

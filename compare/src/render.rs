@@ -108,9 +108,26 @@ impl EmbreeBackend {
         spheres: &[Vec<strahl::SphereSet>],
         instances: &[Instance],
     ) -> anyhow::Result<Self> {
+        Self::build_with_solids(objects, spheres, &[], instances)
+    }
+
+    /// [`build_mixed`](Self::build_mixed) with each object's solids after its sphere sets, as
+    /// Embree user geometry running strahl's solid intersection (so the comparison isolates the
+    /// acceleration structure and dispatch).
+    pub fn build_with_solids(
+        objects: &[Vec<TriangleMesh>],
+        spheres: &[Vec<strahl::SphereSet>],
+        solids: &[Vec<strahl::Solid>],
+        instances: &[Instance],
+    ) -> anyhow::Result<Self> {
         let device = Device::new("threads=2")?;
         let xfms: Vec<(usize, [f32; 12])> = instances.iter().map(|i| (i.object, column_major(&i.transform))).collect();
-        let scene = embree::Scene::build_instanced_mixed(&device, objects, spheres, &xfms, embree::Quality::Medium)?;
+        let prepared = solids
+            .iter()
+            .map(|o| o.iter().map(|s| strahl::shapes::PreparedSolid::new(s, Default::default())).collect())
+            .collect::<strahl::Result<Vec<Vec<_>>>>()?;
+        let scene =
+            embree::Scene::build_instanced_mixed(&device, objects, spheres, &prepared, &xfms, embree::Quality::Medium)?;
         let cofactor = instances.iter().map(|i| cofactor(&i.transform)).collect();
         let sphere_from = instances
             .iter()
@@ -356,7 +373,7 @@ pub fn compare_scene(
     let spheres = file.load_spheres()?;
     let (scene, backend) = pool.install(|| -> anyhow::Result<_> {
         let scene = file.build_from(objects.clone(), &strahl::BuildConfig::default())?;
-        Ok((scene, EmbreeBackend::build_mixed(&objects, &spheres, &file.instances)?))
+        Ok((scene, EmbreeBackend::build_with_solids(&objects, &spheres, &file.load_solids(), &file.instances)?))
     })?;
     let ours = Renderer { query: &scene, world: &world, camera, settings };
     let theirs = Renderer { query: &backend, world: &world, camera, settings };

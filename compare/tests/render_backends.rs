@@ -19,13 +19,23 @@ fn small(file: &SceneFile) -> Settings {
 #[test]
 fn embree_backend_renders_the_same_image() {
     // Analytic spheres (strahl's robust test against Embree's SPHERE_POINT) differ in the last
-    // bits, which grazing and mirrored rays carry to a few pixels: 0.22% at full size.
-    for (name, per_mille) in [("whitted", 1), ("cornell", 1), ("beer", 1), ("spheres", 10)] {
+    // bits, which grazing and mirrored rays carry to a few pixels: 0.22% at full size. Solids run
+    // the same code on both sides (Embree user geometry), but Embree moves rays into instance
+    // space by its own inverse, and the glass wedge's trapped, totally reflected paths carry
+    // those last bits into 3.2% of the pixels at full size (9,623 of the 9,730 differing pixels
+    // lie in the wedge's box).
+    for (name, per_mille) in [("whitted", 1), ("cornell", 1), ("beer", 1), ("spheres", 10), ("solids", 50)] {
         let file = SceneFile::read(scene(name)).unwrap();
         let objects = file.load_objects().unwrap();
         let world = file.world(&objects).unwrap();
         let ours = file.build_from(objects.clone(), &BuildConfig::default()).unwrap();
-        let theirs = EmbreeBackend::build_mixed(&objects, &file.load_spheres().unwrap(), &file.instances).unwrap();
+        let theirs = EmbreeBackend::build_with_solids(
+            &objects,
+            &file.load_spheres().unwrap(),
+            &file.load_solids(),
+            &file.instances,
+        )
+        .unwrap();
         let camera = file.camera.unwrap().render_camera().unwrap();
         let settings = small(&file);
         let (a, sa) = Renderer { query: &ours, world: &world, camera, settings }.render(&|_| {}).unwrap();

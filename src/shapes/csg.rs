@@ -334,6 +334,36 @@ impl CompiledSolid {
     }
 }
 
+/// One solid checked and flattened for intersection on its own, outside a scene: the same code
+/// the solid BVH's leaves run, for callers that bring their own acceleration structure (the
+/// harness hands it to Embree as user geometry).
+#[derive(Clone, Debug)]
+pub struct PreparedSolid(CompiledSolid);
+
+impl PreparedSolid {
+    /// Checks and flattens `solid` ([`Error::BadSolid`](crate::Error::BadSolid) with index 0
+    /// where it cannot be built).
+    pub fn new(solid: &Solid, solver: QuarticSolver) -> crate::Result<Self> {
+        CompiledSolid::new(solid, solver).map(Self).map_err(|message| crate::Error::BadSolid { index: 0, message })
+    }
+
+    /// World bounds (rounded outwards to float32).
+    pub fn bounds(&self) -> (Vec3, Vec3) {
+        self.0.bounds
+    }
+
+    /// The first surface crossing of `ray` in `(tnear, tfar]`: its `t`, the outward unit normal
+    /// there, and the index of the primitive crossed (a hit's `prim_id`). Invalid rays miss.
+    pub fn intersect(&self, ray: &crate::Ray) -> Option<(f32, Vec3, u32)> {
+        if !ray.is_valid() {
+            return None;
+        }
+        let r = ray.clamped_to_zero();
+        let (t, b) = self.0.first_hit(r.origin, r.dir, r.tnear, r.tfar)?;
+        Some((t, self.0.normal(r.origin, r.dir, t, &b), b.leaf as u32))
+    }
+}
+
 /// `v` in float64.
 #[inline(always)]
 pub(crate) fn dvec(v: Vec3) -> DVec3 {

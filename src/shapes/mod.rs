@@ -22,7 +22,7 @@ use glam::Vec3;
 
 use crate::error::{Error, Result};
 use crate::geometry::MAX_COORDINATE;
-pub use csg::{CSG_TOLERANCE, CsgOp, MAX_LEAVES, MAX_SOLID_DEPTH, Solid};
+pub use csg::{CSG_TOLERANCE, CsgOp, MAX_LEAVES, MAX_SOLID_DEPTH, PreparedSolid, Solid};
 pub use primitive::Primitive;
 pub use solve::{QuarticSolver, quadratic, quartic};
 pub use sphere::SphereTest;
