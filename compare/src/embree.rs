@@ -280,8 +280,9 @@ pub struct Scene {
     /// Wall time of the commit (the BVH build); for instances, of all commits.
     pub build_ms: f64,
     objects: Vec<Scene>,
-    /// The solids its user geometries point to, kept alive (and unmoved: boxed) with the scene.
-    solids: Vec<Box<strahl::shapes::PreparedSolid>>,
+    /// The solids its user geometries point to, kept alive with the scene (the vector is never
+    /// resized after they are attached, so its elements stay where Embree was told they are).
+    solids: Vec<strahl::shapes::PreparedSolid>,
 }
 
 // SAFETY: a committed scene is immutable; Embree documents rtcIntersect*/rtcOccluded* on a committed
@@ -353,7 +354,7 @@ impl Scene {
                 rtcReleaseGeometry(g);
             }
             attach_spheres(device, raw, spheres, meshes.len())?;
-            scene.solids = solids.iter().cloned().map(Box::new).collect();
+            scene.solids = solids.to_vec();
             attach_solids(device, raw, &scene.solids, meshes.len() + spheres.len())?;
             let start = Instant::now();
             rtcCommitScene(raw);
@@ -526,12 +527,12 @@ fn attach_spheres(device: &Device, raw: RTCScene, sets: &[strahl::SphereSet], fi
 }
 
 /// Attaches each solid as an `RTC_GEOMETRY_TYPE_USER` geometry of one primitive with id
-/// `first_id + index`, its user pointer the boxed solid (which `Scene::solids` keeps alive and in
-/// place for the scene's life).
+/// `first_id + index`, its user pointer the solid (which `Scene::solids` keeps alive and in place
+/// for the scene's life).
 fn attach_solids(
     device: &Device,
     raw: RTCScene,
-    solids: &[Box<strahl::shapes::PreparedSolid>],
+    solids: &[strahl::shapes::PreparedSolid],
     first_id: usize,
 ) -> anyhow::Result<()> {
     // SAFETY: `device.raw` and `raw` are live; each geometry is checked for null; the user
@@ -544,7 +545,7 @@ fn attach_solids(
                 device.check("rtcNewGeometry")?;
                 anyhow::bail!("rtcNewGeometry(USER) failed");
             }
-            let ptr = &**solid as *const strahl::shapes::PreparedSolid as *mut c_void;
+            let ptr = solid as *const strahl::shapes::PreparedSolid as *mut c_void;
             rtcSetGeometryUserPrimitiveCount(g, 1);
             rtcSetGeometryUserData(g, ptr);
             rtcSetGeometryBoundsFunction(g, solid_bounds, std::ptr::null_mut());
