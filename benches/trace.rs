@@ -120,6 +120,12 @@ fn bench_rays(c: &mut Criterion) {
     let scene = Scene::build_with_spheres(vec![], vec![flake], &BuildConfig::default()).unwrap();
     let cam = Camera::look_at(Vec3::new(2.1, 1.3, 2.1), Vec3::new(0.0, 0.1, 0.0), Vec3::Y, 60.0);
     bench_scene(c, "sphereflake_analytic", &scene, scene.bounds(), &cam, Vec3::new(-3.0, 6.0, 4.0));
+    // Solids (issue 30): data/solids.toml's CSG die, torus, cone, cylinder, quadric and more,
+    // placed by its instances, on its floor.
+    let file = strahl::SceneFile::read(Path::new(env!("CARGO_MANIFEST_DIR")).join("data/solids.toml")).unwrap();
+    let scene = file.build(&BuildConfig::default()).unwrap();
+    let cam = file.camera.unwrap().camera();
+    bench_scene(c, "solids", &scene, scene.bounds(), &cam, file.lights[0].position);
     // Instanced: 762 instances, 13.5 million placed triangles.
     let file = strahl::SceneFile::read(Path::new(env!("CARGO_MANIFEST_DIR")).join("data/forest.toml")).unwrap();
     let scene = file.build(&BuildConfig::default()).unwrap();
