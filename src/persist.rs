@@ -314,6 +314,16 @@ fn read_solid(r: &mut Reader, depth: usize) -> Result<Solid> {
             for x in &mut a {
                 *x = r.f32()?;
             }
+            // Parameters a kind does not use must be written as +0.0, so that bytes read back
+            // are the bytes written.
+            let used = match kind {
+                3 | 6 => 2,
+                7 => 10,
+                _ => 0,
+            };
+            if a[used..].iter().any(|x| x.to_bits() != 0) {
+                return Err(bad(format!("primitive kind {kind} with parameters it does not use")));
+            }
             Ok(Solid::Primitive(match kind {
                 0 => Primitive::Sphere,
                 1 => Primitive::Box,

@@ -187,23 +187,26 @@ fn queries_agree_across_forms() {
 #[test]
 fn torus_solvers_agree_away_from_tangents() {
     let torus = || vec![placed(Primitive::Torus { major: 1.0, minor: 0.25 }, Vec3::ONE, 0.7, Vec3::ZERO)];
-    let (a, b) = (scene_of(torus(), QuarticSolver::Ferrari), scene_of(torus(), QuarticSolver::Bracketed));
-    let mut rng = Rng(5);
-    let (mut hits, mut differ) = (0, 0);
-    for _ in 0..20_000 {
-        let o = rng.vec(1.0).normalize() * 5.0;
-        let ray = Ray::new(o, rng.vec(1.3) - o);
-        match (a.intersect(&ray), b.intersect(&ray)) {
-            (Some(x), Some(y)) => {
-                hits += 1;
-                assert!((x.t - y.t).abs() <= 1e-5 * x.t, "{x:?} {y:?}");
+    let reference = scene_of(torus(), QuarticSolver::Bracketed);
+    for solver in [QuarticSolver::Ferrari, QuarticSolver::Laguerre] {
+        let other = scene_of(torus(), solver);
+        let mut rng = Rng(5);
+        let (mut hits, mut differ) = (0, 0);
+        for _ in 0..20_000 {
+            let o = rng.vec(1.0).normalize() * 5.0;
+            let ray = Ray::new(o, rng.vec(1.3) - o);
+            match (other.intersect(&ray), reference.intersect(&ray)) {
+                (Some(x), Some(y)) => {
+                    hits += 1;
+                    assert!((x.t - y.t).abs() <= 1e-5 * x.t, "{solver:?}: {x:?} {y:?}");
+                }
+                (None, None) => {}
+                _ => differ += 1,
             }
-            (None, None) => {}
-            _ => differ += 1,
         }
+        assert!(hits > 5000, "{hits}");
+        assert!(differ <= 4, "{solver:?}: {differ} rays hit with one solver only");
     }
-    assert!(hits > 5000, "{hits}");
-    assert!(differ <= 4, "{differ} rays hit with one solver only");
 }
 
 #[test]

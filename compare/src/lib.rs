@@ -23,6 +23,7 @@ pub mod render;
 pub mod report;
 pub mod scenes;
 pub mod spheres;
+pub mod torus;
 
 /// A rayon pool of `threads` workers with flush-to-zero and denormals-are-zero set on each.
 pub fn pool(threads: usize) -> anyhow::Result<rayon::ThreadPool> {

@@ -78,6 +78,11 @@ struct Args {
     /// sphere_tests.png and tessellation.png to --out, then exits.
     #[arg(long)]
     spheres: bool,
+    /// Torus solvers (issue 30): Ferrari, bracketed and Laguerre on one torus, speed against
+    /// accuracy (against sphere tracing its exact distance function); writes torus.md,
+    /// torus.json and torus_solvers.png to --out, then exits.
+    #[arg(long)]
+    torus: bool,
     /// Internal: redraw --spheres' two charts into --out from its spheres.json, without measuring.
     #[arg(long, hide = true)]
     spheres_charts_from: Option<PathBuf>,
@@ -156,6 +161,11 @@ fn main() -> anyhow::Result<()> {
     if let Some(json) = &args.spheres_charts_from {
         let r: compare::spheres::SphereReport = serde_json::from_slice(&std::fs::read(json)?)?;
         return compare::spheres::charts(&args.out, &r);
+    }
+    if args.torus {
+        let r = compare::torus::run(args.width as usize, args.passes, &pool, &args.out)?;
+        print!("{}", compare::torus::markdown(&r));
+        return Ok(());
     }
     if args.spheres {
         if let Some(&l) = args.sphere_levels.iter().find(|&&l| l > 7) {

@@ -147,7 +147,7 @@ fn far_camera(k: f32) -> Camera {
 /// Median Mrays/s of each scene's coherent closest-hit stream over `rays`, the scenes timed in
 /// interleaved passes (one warm-up pass, then `passes`, each starting one scene later), so that
 /// the machine's drift falls on all of them alike. Also returns each scene's hits.
-fn interleaved_mrays(
+pub(crate) fn interleaved_mrays(
     pool: &rayon::ThreadPool,
     scenes: &[Scene],
     rays: &RayStream,
@@ -202,7 +202,7 @@ fn truth(spheres: &[(Vec3, f32)], ray: &Ray) -> (Option<(f64, usize)>, bool) {
     (best, tie)
 }
 
-fn rel_quantiles(mut v: Vec<f64>) -> [f64; 3] {
+pub(crate) fn rel_quantiles(mut v: Vec<f64>) -> [f64; 3] {
     if v.is_empty() {
         return [0.0; 3];
     }
@@ -644,44 +644,47 @@ pub fn markdown(r: &SphereReport) -> String {
     s
 }
 
+/// A scatter chart: one labelled point per `(label, error, Mrays/s)`, the error on a log axis
+/// (decade labels only), written to `path` (900×520 PNG).
+pub(crate) fn scatter(path: &Path, title: &str, xdesc: &str, points: Vec<(String, f64, f64)>) -> anyhow::Result<()> {
+    use plotters::prelude::*;
+    let root = BitMapBackend::new(path, (900, 520)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let xs: Vec<f64> = points.iter().map(|p| p.1.max(1e-12).log10()).collect();
+    let (xmin, xmax) = xs.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
+    let ymax = points.iter().map(|p| p.2).fold(1.0, f64::max) * 1.25;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, ("sans-serif", 22))
+        .margin(20)
+        .x_label_area_size(50)
+        .y_label_area_size(60)
+        .build_cartesian_2d((xmin - 0.5).floor()..(xmax + 2.5).ceil(), 0f64..ymax)?;
+    chart
+        .configure_mesh()
+        .x_desc(xdesc)
+        .y_desc("Mrays/s (higher is better)")
+        // Decades only: plotters also places ticks between them.
+        .x_label_formatter(&|x| {
+            if (x - x.round()).abs() < 1e-6 { format!("1e{:.0}", x.round()) } else { String::new() }
+        })
+        .label_style(("sans-serif", 14))
+        .draw()?;
+    chart.draw_series(points.iter().zip(&xs).map(|(p, &x)| Circle::new((x, p.2), 6, BLUE.filled())))?;
+    // Labels above their points, every second one below, so that neighbours do not overlap.
+    chart.draw_series(points.iter().zip(&xs).enumerate().map(|(i, (p, &x))| {
+        let dy = if i % 2 == 0 { 0.03 } else { -0.07 };
+        Text::new(p.0.clone(), (x, p.2 + ymax * dy), ("sans-serif", 14))
+    }))?;
+    root.present()?;
+    Ok(())
+}
+
 /// `sphere_tests.png` (Mrays/s against the far camera's p99.9 t error) and `tessellation.png`
 /// (Mrays/s against silhouette error, memory in the labels).
 pub fn charts(dir: &Path, r: &SphereReport) -> anyhow::Result<()> {
-    use plotters::prelude::*;
     if !crate::report::ensure_font() {
         anyhow::bail!("no DejaVu font found for chart labels (apt-get install fonts-dejavu-core)");
     }
-    let scatter = |path: &Path, title: &str, xdesc: &str, points: Vec<(String, f64, f64)>| -> anyhow::Result<()> {
-        let root = BitMapBackend::new(path, (900, 520)).into_drawing_area();
-        root.fill(&WHITE)?;
-        let xs: Vec<f64> = points.iter().map(|p| p.1.max(1e-12).log10()).collect();
-        let (xmin, xmax) = xs.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
-        let ymax = points.iter().map(|p| p.2).fold(1.0, f64::max) * 1.25;
-        let mut chart = ChartBuilder::on(&root)
-            .caption(title, ("sans-serif", 22))
-            .margin(20)
-            .x_label_area_size(50)
-            .y_label_area_size(60)
-            .build_cartesian_2d((xmin - 0.5).floor()..(xmax + 2.5).ceil(), 0f64..ymax)?;
-        chart
-            .configure_mesh()
-            .x_desc(xdesc)
-            .y_desc("Mrays/s (higher is better)")
-            // Decades only: plotters also places ticks between them.
-            .x_label_formatter(&|x| {
-                if (x - x.round()).abs() < 1e-6 { format!("1e{:.0}", x.round()) } else { String::new() }
-            })
-            .label_style(("sans-serif", 14))
-            .draw()?;
-        chart.draw_series(points.iter().zip(&xs).map(|(p, &x)| Circle::new((x, p.2), 6, BLUE.filled())))?;
-        // Labels above their points, every second one below, so that neighbours do not overlap.
-        chart.draw_series(points.iter().zip(&xs).enumerate().map(|(i, (p, &x))| {
-            let dy = if i % 2 == 0 { 0.03 } else { -0.07 };
-            Text::new(p.0.clone(), (x, p.2 + ymax * dy), ("sans-serif", 14))
-        }))?;
-        root.present()?;
-        Ok(())
-    };
     scatter(
         &dir.join("sphere_tests.png"),
         "Sphere tests: speed against accuracy (camera 1000× farther)",

@@ -19,17 +19,23 @@ pub enum QuarticSolver {
     /// interval is found; a double root (a tangent ray) reads as none.
     #[default]
     Bracketed,
+    /// The seeds' Laguerre iteration in complex arithmetic, each root deflated out of the
+    /// polynomial before the next is sought, then every near-real root polished by Newton steps
+    /// on the undeflated quartic (Numerical Recipes' `zroots`). Converges from anywhere, but a
+    /// root close to another may come out complex and be dropped.
+    Laguerre,
 }
 
 impl QuarticSolver {
     /// Every solver.
-    pub const ALL: [QuarticSolver; 2] = [QuarticSolver::Ferrari, QuarticSolver::Bracketed];
+    pub const ALL: [QuarticSolver; 3] = [QuarticSolver::Ferrari, QuarticSolver::Bracketed, QuarticSolver::Laguerre];
 
     /// The solver's name, as the harness and scene files spell it.
     pub fn name(self) -> &'static str {
         match self {
             QuarticSolver::Ferrari => "ferrari",
             QuarticSolver::Bracketed => "bracketed",
+            QuarticSolver::Laguerre => "laguerre",
         }
     }
 }
@@ -263,7 +269,131 @@ pub fn quartic(solver: QuarticSolver, c: [f64; 5], lo: f64, hi: f64, out: &mut [
     match solver {
         QuarticSolver::Ferrari => quartic_ferrari(c, lo, hi, out),
         QuarticSolver::Bracketed => quartic_in(c, lo, hi, out),
+        QuarticSolver::Laguerre => quartic_laguerre(c, lo, hi, out),
     }
+}
+
+/// A complex number, for Laguerre's iteration.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct C(f64, f64);
+
+impl C {
+    fn add(self, o: C) -> C {
+        C(self.0 + o.0, self.1 + o.1)
+    }
+    fn sub(self, o: C) -> C {
+        C(self.0 - o.0, self.1 - o.1)
+    }
+    fn mul(self, o: C) -> C {
+        C(self.0 * o.0 - self.1 * o.1, self.0 * o.1 + self.1 * o.0)
+    }
+    fn div(self, o: C) -> C {
+        let d = o.0 * o.0 + o.1 * o.1;
+        C((self.0 * o.0 + self.1 * o.1) / d, (self.1 * o.0 - self.0 * o.1) / d)
+    }
+    fn scale(self, k: f64) -> C {
+        C(self.0 * k, self.1 * k)
+    }
+    fn abs(self) -> f64 {
+        self.0.hypot(self.1)
+    }
+    fn sqrt(self) -> C {
+        let r = self.abs();
+        let re = (0.5 * (r + self.0)).max(0.0).sqrt();
+        let im = (0.5 * (r - self.0)).max(0.0).sqrt().copysign(self.1);
+        C(re, im)
+    }
+}
+
+/// Laguerre's iteration for one root of the complex polynomial `a` (lowest degree first) from
+/// `x` (Numerical Recipes' `laguer`, its fractional steps against limit cycles); at most 80
+/// steps.
+fn laguerre(a: &[C], mut x: C) -> C {
+    const FRAC: [f64; 8] = [0.5, 0.25, 0.75, 0.13, 0.38, 0.62, 0.88, 1.0];
+    let m = a.len() - 1;
+    for iter in 1..=80 {
+        let mut b = a[m];
+        let mut err = b.abs();
+        let (mut d, mut f) = (C(0.0, 0.0), C(0.0, 0.0));
+        let ax = x.abs();
+        for j in (0..m).rev() {
+            f = x.mul(f).add(d);
+            d = x.mul(d).add(b);
+            b = x.mul(b).add(a[j]);
+            err = b.abs() + ax * err;
+        }
+        if b.abs() <= err * f64::EPSILON {
+            return x;
+        }
+        let g = d.div(b);
+        let g2 = g.mul(g);
+        let h = g2.sub(f.div(b).scale(2.0));
+        let sq = h.scale(m as f64).sub(g2).scale((m - 1) as f64).sqrt();
+        let (gp, gm) = (g.add(sq), g.sub(sq));
+        let big = if gp.abs() >= gm.abs() { gp } else { gm };
+        let dx = if big.abs() > 0.0 {
+            C(m as f64, 0.0).div(big)
+        } else {
+            let r = 1.0 + ax;
+            C(r * (iter as f64).cos(), r * (iter as f64).sin())
+        };
+        let x1 = x.sub(dx);
+        if x1 == x || !(x1.0.is_finite() && x1.1.is_finite()) {
+            return x;
+        }
+        x = if iter % 10 != 0 { x1 } else { x.sub(dx.scale(FRAC[(iter / 10) % 8])) };
+    }
+    x
+}
+
+/// The real roots of the quartic `c` in `[lo, hi]`, ascending, by [`QuarticSolver::Laguerre`].
+pub fn quartic_laguerre(c: [f64; 5], lo: f64, hi: f64, out: &mut [f64; 4]) -> usize {
+    let deg = (0..5).rev().find(|&k| c[k] != 0.0).unwrap_or(0);
+    if deg == 0 || c.iter().any(|x| !x.is_finite()) {
+        return 0;
+    }
+    // A fixed array, deflated in place: no allocation per ray.
+    let mut a = c.map(|x| C(x, 0.0));
+    let mut roots = [C(0.0, 0.0); 4];
+    for k in (1..=deg).rev() {
+        let x = laguerre(&a[..=k], C(0.0, 0.0));
+        roots[deg - k] = x;
+        // Deflate: divide by (z − x); the quotient's coefficients replace a[0..k].
+        let mut b = a[k];
+        for j in (0..k).rev() {
+            let t = a[j];
+            a[j] = b;
+            b = x.mul(b).add(t);
+        }
+    }
+    let mut n = 0;
+    for r in &roots[..deg] {
+        // Near-real roots, polished on the quartic itself.
+        if r.1.abs() > 1e-6 * (1.0 + r.0.abs()) {
+            continue;
+        }
+        let mut x = r.0;
+        for _ in 0..4 {
+            let (f, df) = eval(&c, x);
+            if df == 0.0 {
+                break;
+            }
+            x -= f / df;
+        }
+        if x >= lo && x <= hi && x.is_finite() {
+            out[n] = x;
+            n += 1;
+        }
+    }
+    out[..n].sort_unstable_by(f64::total_cmp);
+    let mut m = 0;
+    for i in 0..n {
+        if m == 0 || out[i] != out[m - 1] {
+            out[m] = out[i];
+            m += 1;
+        }
+    }
+    m
 }
 
 #[cfg(test)]
@@ -296,7 +426,7 @@ mod tests {
     fn both_quartic_solvers_find_well_separated_roots() {
         for roots in [[-3.0, -1.0, 0.5, 2.0], [0.1, 0.2, 0.3, 0.4], [-10.0, 1.0, 1.5, 7.0]] {
             let c = from_roots(roots);
-            for solver in [QuarticSolver::Ferrari, QuarticSolver::Bracketed] {
+            for solver in QuarticSolver::ALL {
                 let mut out = [0.0; 4];
                 let n = quartic(solver, c, -100.0, 100.0, &mut out);
                 assert_eq!(n, 4, "{solver:?} {roots:?} {out:?}");
@@ -322,7 +452,7 @@ mod tests {
     #[test]
     fn nan_coefficients_end() {
         let mut out = [0.0; 4];
-        for solver in [QuarticSolver::Ferrari, QuarticSolver::Bracketed] {
+        for solver in QuarticSolver::ALL {
             let n = quartic(solver, [f64::NAN, 1.0, 0.0, 0.0, 1.0], -1.0, 1.0, &mut out);
             assert!(out[..n].iter().all(|x| x.is_finite() || x.is_nan()));
         }
