@@ -437,35 +437,9 @@ impl SceneFile {
             let what = format!("instance {i}");
             let object = index(&inst.mesh, &what)?;
             instance_materials.push(material(&inst.material, &what)?);
-            let transform = match &inst.matrix {
-                Some(rows) => {
-                    if inst.translate.is_some() || inst.rotate.is_some() || inst.scale.is_some() {
-                        return Err(err(format!("{what}: give `matrix` or translate/rotate/scale, not both")));
-                    }
-                    match rows.len() {
-                        3 => {}
-                        4 if rows[3] == [0.0, 0.0, 0.0, 1.0] => {}
-                        4 => {
-                            return Err(err(format!(
-                                "{what}: the matrix's fourth row is {:?}; an affine transform's is [0, 0, 0, 1]",
-                                rows[3]
-                            )));
-                        }
-                        n => {
-                            return Err(err(format!(
-                                "{what}: `matrix` has {n} rows; give 3 (or 4, the last [0, 0, 0, 1])"
-                            )));
-                        }
-                    }
-                    let c = |k: usize| Vec3::new(rows[0][k], rows[1][k], rows[2][k]);
-                    Affine3A::from_mat3_translation(Mat3::from_cols(c(0), c(1), c(2)), c(3))
-                }
-                None => trs(
-                    inst.translate.map_or(Vec3::ZERO, Vec3::from),
-                    inst.rotate.map_or(Vec3::ZERO, Vec3::from),
-                    inst.scale.map_or(Vec3::ONE, Scale::vec),
-                ),
-            };
+            let transform = placement(inst.translate, inst.rotate, inst.scale, &inst.matrix)
+                .map_err(|m| err(format!("{what}: {m}")))?
+                .unwrap_or(Affine3A::IDENTITY);
             check_transform(&transform).map_err(|m| err(format!("{what}: {m}")))?;
             instances.push(Instance::new(object, transform));
         }
@@ -767,6 +741,43 @@ fn material_from_mtl(m: &tobj::Material, texture: Option<u32>) -> std::result::R
 fn trs(t: Vec3, rot_deg: Vec3, s: Vec3) -> Affine3A {
     let q = Quat::from_euler(EulerRot::XYZ, rot_deg.x.to_radians(), rot_deg.y.to_radians(), rot_deg.z.to_radians());
     Affine3A::from_scale_rotation_translation(s, q, t)
+}
+
+/// The placement written as `matrix` (3 rows, or 4 whose last is `[0, 0, 0, 1]`) or as
+/// translate · rotate · scale; `None` where neither is given. `Err` says what is malformed.
+fn placement(
+    translate: Option<[f32; 3]>,
+    rotate: Option<[f32; 3]>,
+    scale: Option<Scale>,
+    matrix: &Option<Vec<[f32; 4]>>,
+) -> std::result::Result<Option<Affine3A>, String> {
+    let trs_given = translate.is_some() || rotate.is_some() || scale.is_some();
+    match matrix {
+        Some(rows) => {
+            if trs_given {
+                return Err("give `matrix` or translate/rotate/scale, not both".into());
+            }
+            match rows.len() {
+                3 => {}
+                4 if rows[3] == [0.0, 0.0, 0.0, 1.0] => {}
+                4 => {
+                    return Err(format!(
+                        "the matrix's fourth row is {:?}; an affine transform's is [0, 0, 0, 1]",
+                        rows[3]
+                    ));
+                }
+                n => return Err(format!("`matrix` has {n} rows; give 3 (or 4, the last [0, 0, 0, 1])")),
+            }
+            let c = |k: usize| Vec3::new(rows[0][k], rows[1][k], rows[2][k]);
+            Ok(Some(Affine3A::from_mat3_translation(Mat3::from_cols(c(0), c(1), c(2)), c(3))))
+        }
+        None if trs_given => Ok(Some(trs(
+            translate.map_or(Vec3::ZERO, Vec3::from),
+            rotate.map_or(Vec3::ZERO, Vec3::from),
+            scale.map_or(Vec3::ONE, Scale::vec),
+        ))),
+        None => Ok(None),
+    }
 }
 
 fn check_transform(m: &Affine3A) -> std::result::Result<(), String> {

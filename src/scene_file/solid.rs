@@ -6,7 +6,7 @@
 use glam::{Affine3A, Mat3, Vec3};
 use serde::Deserialize;
 
-use super::{Scale, trs};
+use super::{Scale, placement};
 use crate::shapes::{CsgOp, MAX_SOLID_DEPTH, Primitive, Solid};
 
 /// One node of a solid tree, as written.
@@ -245,24 +245,7 @@ fn node(
             .collect::<Result<Vec<_>, _>>()?;
         Solid::Csg(op, children)
     };
-    let transform = match &raw.matrix {
-        Some(rows) => {
-            if raw.translate.is_some() || raw.rotate.is_some() || raw.scale.is_some() {
-                return bad("give `matrix` or translate/rotate/scale, not both".into());
-            }
-            if !(rows.len() == 3 || (rows.len() == 4 && rows[3] == [0.0, 0.0, 0.0, 1.0])) {
-                return bad("`matrix` needs 3 rows (or 4, the last [0, 0, 0, 1])".into());
-            }
-            let c = |k: usize| Vec3::new(rows[0][k], rows[1][k], rows[2][k]);
-            Some(Affine3A::from_mat3_translation(Mat3::from_cols(c(0), c(1), c(2)), c(3)))
-        }
-        None if raw.translate.is_some() || raw.rotate.is_some() || raw.scale.is_some() => Some(trs(
-            raw.translate.map_or(Vec3::ZERO, Vec3::from),
-            raw.rotate.map_or(Vec3::ZERO, Vec3::from),
-            raw.scale.map_or(Vec3::ONE, Scale::vec),
-        )),
-        None => None,
-    };
+    let transform = placement(raw.translate, raw.rotate, raw.scale, &raw.matrix).map_err(|m| format!("{at}: {m}"))?;
     Ok(match transform {
         Some(m) if !crate::instance::is_invertible(&m) => {
             return bad("the transform is not finite and invertible".into());

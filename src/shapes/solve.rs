@@ -252,10 +252,15 @@ pub fn quartic_ferrari(c: [f64; 5], lo: f64, hi: f64, out: &mut [f64; 4]) -> usi
             k += 1;
         }
     }
-    out[..k].sort_unstable_by(f64::total_cmp);
     // A double root found twice (from both quadratics) counts once.
+    sorted_distinct(out, k)
+}
+
+/// Sorts `out[..n]` and keeps each value once; returns how many remain.
+fn sorted_distinct(out: &mut [f64; 4], n: usize) -> usize {
+    out[..n].sort_unstable_by(f64::total_cmp);
     let mut m = 0;
-    for i in 0..k {
+    for i in 0..n {
         if m == 0 || out[i] != out[m - 1] {
             out[m] = out[i];
             m += 1;
@@ -385,15 +390,7 @@ pub fn quartic_laguerre(c: [f64; 5], lo: f64, hi: f64, out: &mut [f64; 4]) -> us
             n += 1;
         }
     }
-    out[..n].sort_unstable_by(f64::total_cmp);
-    let mut m = 0;
-    for i in 0..n {
-        if m == 0 || out[i] != out[m - 1] {
-            out[m] = out[i];
-            m += 1;
-        }
-    }
-    m
+    sorted_distinct(out, n)
 }
 
 #[cfg(test)]
