@@ -622,6 +622,13 @@ fn run_instanced(
             file.path.display()
         );
     }
+    if file.load_solids().iter().any(|s| !s.is_empty()) {
+        anyhow::bail!(
+            "{}: solids are rendered by `compare --render` (Embree tracing them as user geometry) and their \
+             solvers measured by `compare --torus`; the scene-file harness compares triangle scenes",
+            file.path.display()
+        );
+    }
     let objects = file.load_objects()?;
     progress("building");
     let cfg = BuildConfig::default();
