@@ -218,7 +218,7 @@ impl CompiledSolid {
                     return Err(format!("{op:?} of more than {} operands", u16::MAX));
                 }
                 let mut acc: Option<Bounds> = None;
-                for (i, o) in operands.iter().enumerate() {
+                for o in operands {
                     let b = self.flatten(o, m, true, depth + 1)?;
                     acc = Some(match (acc, op) {
                         (None, _) => b,
@@ -227,10 +227,7 @@ impl CompiledSolid {
                             (Some(a), Some(b)) => Some((a.0.max(b.0), a.1.min(b.1))),
                             (a, b) => a.or(b),
                         },
-                        (Some(a), CsgOp::Difference) => {
-                            let _ = i;
-                            a
-                        }
+                        (Some(a), CsgOp::Difference) => a,
                     });
                 }
                 if operands.len() > 1 {
@@ -322,11 +319,10 @@ impl CompiledSolid {
         });
     }
 
-    /// The outward unit normal (world space) where the world ray `o + t d` crosses `b`.
-    pub fn normal(&self, o: Vec3, d: Vec3, t: f32, b: &Bound) -> Vec3 {
+    /// The outward unit normal (world space) where the world ray `o + t d` crosses `b` (at `b.t`).
+    pub fn normal(&self, o: Vec3, d: Vec3, b: &Bound) -> Vec3 {
         let leaf = &self.leaves[b.leaf as usize];
         let p = leaf.to_object.transform_point3(dvec(o) + b.t.clamp(-1e300, 1e300) * dvec(d));
-        let _ = t;
         let n = leaf.normal_to_world * leaf.prim.normal(p, b.face);
         let n = if b.flip { -n } else { n };
         let n = n.normalize_or_zero();
@@ -360,7 +356,7 @@ impl PreparedSolid {
         }
         let r = ray.clamped_to_zero();
         let (t, b) = self.0.first_hit(r.origin, r.dir, r.tnear, r.tfar)?;
-        Some((t, self.0.normal(r.origin, r.dir, t, &b), b.leaf as u32))
+        Some((t, self.0.normal(r.origin, r.dir, &b), b.leaf as u32))
     }
 }
 

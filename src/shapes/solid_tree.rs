@@ -132,7 +132,7 @@ impl SolidBvh {
             t,
             u: 0.0,
             v: 0.0,
-            ng: self.solids[s as usize].normal(ray.origin, ray.dir, t, b),
+            ng: self.solids[s as usize].normal(ray.origin, ray.dir, b),
             prim_id: b.leaf as u32,
             geom_id: self.geom_base + s,
             inst_id: INVALID_ID,

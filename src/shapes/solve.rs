@@ -73,13 +73,15 @@ pub fn quadratic(c: [f64; 3]) -> ([f64; 2], usize) {
     ([r0.min(r1), r0.max(r1)], 2)
 }
 
-/// The roots of a polynomial in `[lo, hi]` whose critical points in that interval are `crit`
-/// (ascending): each monotone piece whose ends differ in sign holds one root.
+/// The roots of a polynomial in `[lo, hi]` whose critical points are `crit` (ascending; those
+/// not strictly inside the interval add nothing and are skipped): each monotone piece whose ends
+/// differ in sign holds one root.
 fn between<const N: usize>(c: &[f64; N], crit: &[f64], lo: f64, hi: f64, out: &mut [f64]) -> usize {
     let mut n = 0;
     let mut a = lo;
     let mut fa = eval(c, a).0;
-    for &b in crit.iter().chain(std::iter::once(&hi)) {
+    let inside = crit.iter().filter(|&&x| x > lo && x < hi);
+    for &b in inside.chain(std::iter::once(&hi)) {
         let fb = eval(c, b).0;
         if fa == 0.0 {
             if n == 0 || out[n - 1] != a {
@@ -145,15 +147,7 @@ pub fn cubic_in(c: [f64; 4], lo: f64, hi: f64, out: &mut [f64; 3]) -> usize {
         return k;
     }
     let (crit, nc) = quadratic([c[1], 2.0 * c[2], 3.0 * c[3]]);
-    let mut inside = [0.0; 2];
-    let mut k = 0;
-    for &x in &crit[..nc] {
-        if x > lo && x < hi {
-            inside[k] = x;
-            k += 1;
-        }
-    }
-    between(&c, &inside[..k], lo, hi, out)
+    between(&c, &crit[..nc], lo, hi, out)
 }
 
 /// The real roots of the quartic `c` in `[lo, hi]`, ascending, by [`QuarticSolver::Bracketed`].
@@ -166,16 +160,7 @@ pub fn quartic_in(c: [f64; 5], lo: f64, hi: f64, out: &mut [f64; 4]) -> usize {
     }
     let mut crit = [0.0; 3];
     let nc = cubic_in([c[1], 2.0 * c[2], 3.0 * c[3], 4.0 * c[4]], lo, hi, &mut crit);
-    // Critical points at the interval's ends add nothing.
-    let mut inside = [0.0; 3];
-    let mut k = 0;
-    for &x in &crit[..nc] {
-        if x > lo && x < hi {
-            inside[k] = x;
-            k += 1;
-        }
-    }
-    between(&c, &inside[..k], lo, hi, out)
+    between(&c, &crit[..nc], lo, hi, out)
 }
 
 /// The largest real root of the monic cubic `x³ + a x² + b x + c` (Cardano, or the
