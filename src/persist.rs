@@ -21,14 +21,16 @@ use crate::geometry::TriangleTest;
 use crate::geometry::triangle::{BLOCK, TriBlock};
 use crate::instance::{Instance, InstancedScene};
 use crate::scene::Scene;
-use crate::shapes::{CsgOp, MAX_SOLID_DEPTH, Primitive, QuarticSolver, Solid, SphereSet, SphereTest};
+use crate::shapes::{
+    Blob, BlobComponent, CsgOp, MAX_SOLID_DEPTH, Potential, Primitive, QuarticSolver, Solid, SphereSet, SphereTest,
+};
 
 /// The first bytes of a serialized scene.
 const MAGIC: &[u8; 8] = b"STRAHLSC";
 /// Format version; bumped whenever the layout of nodes, blocks or this format changes. Version 2
-/// appends the sphere sets (their tree is rebuilt on reading), version 3 the solids (likewise);
-/// version 1 and 2 bytes still read.
-const VERSION: u32 = 3;
+/// appends the sphere sets (their tree is rebuilt on reading), version 3 the solids (likewise),
+/// version 4 adds the superellipsoid and blob primitives; older bytes still read.
+const VERSION: u32 = 4;
 /// Deepest solid tree the reader accepts (the builder's own limit, [`MAX_SOLID_DEPTH`]).
 const MAX_SOLID_READ_DEPTH: usize = MAX_SOLID_DEPTH;
 /// Deepest wide level a built tree reaches (`MEDIAN_DEPTH` SAH levels, then at most 32 median
@@ -258,6 +260,14 @@ fn write_solid(w: &mut Writer, s: &Solid) {
             let (kind, params) = primitive_code(p);
             w.u8(kind);
             params.iter().for_each(|&x| w.f32(x));
+            if let Primitive::Blob(b) = p {
+                // The potential, then the balls: centre, radius, strength.
+                w.u8(potential_code(b.potential()));
+                w.u64(b.components().len() as u64);
+                for c in b.components() {
+                    c.center.to_array().iter().chain(&[c.radius, c.strength]).for_each(|&x| w.f32(x));
+                }
+            }
         }
         Solid::Transformed(m, inner) => {
             w.u8(1);
@@ -298,8 +308,28 @@ fn primitive_code(p: &Primitive) -> (u8, [f32; 10]) {
             a = coeffs;
             7
         }
+        Primitive::Superellipsoid { e, n } => {
+            a[..2].copy_from_slice(&[e, n]);
+            8
+        }
+        Primitive::Blob(ref b) => {
+            a[0] = b.threshold();
+            if let Potential::Rational { d } = b.potential() {
+                a[1] = d;
+            }
+            9
+        }
     };
     (kind, a)
+}
+
+fn potential_code(p: Potential) -> u8 {
+    match p {
+        Potential::Pov => 0,
+        Potential::Wyvill => 1,
+        Potential::Rational { .. } => 2,
+        Potential::InverseSquare => 3,
+    }
 }
 
 /// Reads what [`write_solid`] wrote, `depth` levels down.
@@ -316,9 +346,20 @@ fn read_solid(r: &mut Reader, depth: usize) -> Result<Solid> {
             }
             // Parameters a kind does not use must be written as +0.0, so that bytes read back
             // are the bytes written.
-            let used = match kind {
-                3 | 6 => 2,
-                7 => 10,
+            let potential = match kind {
+                9 => Some(match r.u8()? {
+                    0 => Potential::Pov,
+                    1 => Potential::Wyvill,
+                    2 => Potential::Rational { d: a[1] },
+                    3 => Potential::InverseSquare,
+                    k => return Err(bad(format!("unknown blob potential {k}"))),
+                }),
+                _ => None,
+            };
+            let used = match (kind, potential) {
+                (3 | 6 | 8, _) | (9, Some(Potential::Rational { .. })) => 2,
+                (9, _) => 1,
+                (7, _) => 10,
                 _ => 0,
             };
             if a[used..].iter().any(|x| x.to_bits() != 0) {
@@ -333,6 +374,24 @@ fn read_solid(r: &mut Reader, depth: usize) -> Result<Solid> {
                 5 => Primitive::Plane,
                 6 => Primitive::Torus { major: a[0], minor: a[1] },
                 7 => Primitive::Quadric { coeffs: a },
+                8 => Primitive::Superellipsoid { e: a[0], n: a[1] },
+                9 => {
+                    let n = r.count(20)?;
+                    let mut components = Vec::with_capacity(n);
+                    for _ in 0..n {
+                        let mut c = [0.0f32; 5];
+                        for x in &mut c {
+                            *x = r.f32()?;
+                        }
+                        components.push(BlobComponent {
+                            center: glam::Vec3::new(c[0], c[1], c[2]),
+                            radius: c[3],
+                            strength: c[4],
+                        });
+                    }
+                    let potential = potential.unwrap_or(Potential::Pov);
+                    Primitive::Blob(std::sync::Arc::new(Blob::new(a[0], potential, components)))
+                }
                 k => return Err(bad(format!("unknown primitive kind {k}"))),
             }))
         }

@@ -2,10 +2,12 @@
 //! point membership (`Solid::contains`, evaluated on the tree in float64) and across the query
 //! forms (single, packet, stream; closest and any hit; tree against brute force).
 
+use std::sync::Arc;
+
 use glam::{Affine3A, Quat, Vec3};
 use strahl::{
-    BuildConfig, CsgOp, Error, HitStream, Primitive, QuarticSolver, Query, Ray, RayPacket, RayStream, Scene, Solid,
-    SpatialQuery,
+    Blob, BlobComponent, BuildConfig, CsgOp, Error, HitStream, Potential, Primitive, QuarticSolver, Query, Ray,
+    RayPacket, RayStream, Scene, Solid, SpatialQuery,
 };
 
 /// A small deterministic generator (xorshift), uniform in [0, 1).
@@ -77,7 +79,25 @@ fn gallery() -> Vec<Solid> {
             Solid::new(Primitive::Plane).transformed(Affine3A::from_rotation_x(0.6)),
         ])
         .transformed(Affine3A::from_translation(Vec3::new(0.0, 0.0, 3.0))),
+        // Superellipsoids: a rounded box, and a pinched star (non-convex, with thin tips).
+        placed(Primitive::Superellipsoid { e: 0.25, n: 0.6 }, Vec3::splat(0.9), 0.5, Vec3::new(-3.0, 0.0, 3.0)),
+        placed(Primitive::Superellipsoid { e: 2.5, n: 3.0 }, Vec3::ONE, 0.8, Vec3::new(3.0, 0.0, 3.0)),
+        // Blobs with each potential, one carved by a negative component.
+        placed(blob(Potential::Pov), Vec3::ONE, 0.3, Vec3::new(0.0, 3.0, 3.0)),
+        placed(blob(Potential::Wyvill), Vec3::ONE, 1.0, Vec3::new(0.0, -3.0, 3.0)),
+        placed(blob(Potential::Rational { d: 2.0 }), Vec3::splat(0.8), 1.7, Vec3::new(-3.0, 3.0, 3.0)),
+        placed(blob(Potential::InverseSquare), Vec3::ONE, 2.2, Vec3::new(3.0, 3.0, 3.0)),
     ]
+}
+
+/// Three balls in a row and one carving ball.
+fn blob(potential: Potential) -> Primitive {
+    let c =
+        |x: f32, y: f32, radius: f32, strength: f32| BlobComponent { center: Vec3::new(x, y, 0.0), radius, strength };
+    let threshold = if potential == Potential::InverseSquare { 4.0 } else { 0.3 };
+    let components =
+        vec![c(-0.6, 0.0, 0.8, 1.0), c(0.0, 0.1, 0.7, 1.0), c(0.6, 0.0, 0.8, 1.0), c(0.0, -0.3, 0.4, -1.5)];
+    Primitive::Blob(Arc::new(Blob::new(threshold, potential, components)))
 }
 
 fn scene_of(solids: Vec<Solid>, solver: QuarticSolver) -> Scene {
@@ -102,6 +122,7 @@ fn every_hit_is_a_change_of_membership() {
     let solids = gallery();
     let scene = scene_of(solids.clone(), QuarticSolver::Bracketed);
     let mut checked = 0;
+    let mut per_solid = vec![0usize; solids.len()];
     for ray in rays(20_000, 7) {
         let mut hits = Vec::new();
         scene.for_each_hit(&ray, |h| hits.push(*h));
@@ -117,6 +138,7 @@ fn every_hit_is_a_change_of_membership() {
                 // Entering where the outward normal faces the ray.
                 assert_eq!(after, facing_in, "ray {ray:?} hit {h:?}: normal against membership");
                 checked += 1;
+                per_solid[h.geom_id as usize] += 1;
             } else {
                 // Only near another crossing of the same solid (a thin wall, an edge).
                 let near = hits.iter().any(|o| o.geom_id == h.geom_id && o != h && (o.t - h.t).abs() * len < 1e-3);
@@ -125,6 +147,7 @@ fn every_hit_is_a_change_of_membership() {
         }
     }
     assert!(checked > 10_000, "{checked}");
+    assert!(per_solid.iter().all(|&n| n > 100), "crossings checked per solid: {per_solid:?}");
 }
 
 #[test]
@@ -258,6 +281,17 @@ fn bad_solids_are_typed_errors() {
     bad(Solid::new(Primitive::Torus { major: f32::NAN, minor: 0.5 }));
     bad(Solid::new(Primitive::Quadric { coeffs: [f32::NAN; 10] }));
     bad(Solid::new(Primitive::Quadric { coeffs: [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0] }));
+    bad(Solid::new(Primitive::Superellipsoid { e: 0.0, n: 1.0 }));
+    bad(Solid::new(Primitive::Superellipsoid { e: 1.0, n: f32::NAN }));
+    let ball = |radius: f32, strength: f32| BlobComponent { center: Vec3::ZERO, radius, strength };
+    let blob = |t: f32, p: Potential, c: Vec<BlobComponent>| Solid::new(Primitive::Blob(Arc::new(Blob::new(t, p, c))));
+    bad(blob(0.5, Potential::Pov, vec![]));
+    bad(blob(0.5, Potential::Pov, vec![ball(1.0, -1.0)]));
+    bad(blob(0.0, Potential::Pov, vec![ball(1.0, 1.0)]));
+    bad(blob(0.5, Potential::Pov, vec![ball(0.0, 1.0)]));
+    bad(blob(0.5, Potential::Pov, vec![ball(1.0, f32::INFINITY)]));
+    bad(blob(0.5, Potential::Rational { d: -1.0 }, vec![ball(1.0, 1.0)]));
+    bad(blob(0.5, Potential::Pov, vec![BlobComponent { center: Vec3::NAN, radius: 1.0, strength: 1.0 }]));
     assert!(bad(Solid::new(Primitive::Plane)).contains("unbounded"));
     assert!(bad(Solid::union(vec![Solid::new(Primitive::Box), Solid::new(Primitive::Plane)])).contains("unbounded"));
     bad(Solid::union(Vec::new()));

@@ -85,6 +85,8 @@ fn solid_sdl(solid: &strahl::Solid, textures: &mut std::slice::Iter<'_, String>,
     match solid {
         Solid::Primitive(p) => {
             let body = match *p {
+                Primitive::Superellipsoid { e, n } => format!("superellipsoid {{ <{e}, {n}>"),
+                Primitive::Blob(ref b) => blob_sdl(b),
                 Primitive::Sphere => "sphere { 0, 1".to_string(),
                 Primitive::Box => "box { -1, 1".to_string(),
                 Primitive::Cylinder => "cylinder { <0, 0, 0>, <0, 0, 1>, 1".to_string(),
@@ -121,6 +123,48 @@ fn solid_sdl(solid: &strahl::Solid, textures: &mut std::slice::Iter<'_, String>,
             out.push('}');
         }
     }
+}
+
+/// A blob: POV-Ray's own `blob` for its potential, an `isosurface` of the same field for the
+/// others (with a generous gradient bound, so POV-Ray's sampling does not miss the surface).
+fn blob_sdl(b: &strahl::Blob) -> String {
+    use strahl::Potential;
+    if b.potential() == Potential::Pov {
+        let mut s = format!("blob {{ threshold {}", b.threshold());
+        for c in b.components() {
+            write!(s, " sphere {{ {}, {}, strength {} }}", v(c.center), c.radius, c.strength).unwrap();
+        }
+        return s;
+    }
+    let mut f = format!("{}", b.threshold());
+    let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+    let mut gradient = 0.0f32;
+    for c in b.components() {
+        let q = format!(
+            "(pow(x - ({}), 2) + pow(y - ({}), 2) + pow(z - ({}), 2)) / {}",
+            c.center.x,
+            c.center.y,
+            c.center.z,
+            c.radius * c.radius
+        );
+        let term = match b.potential() {
+            Potential::Pov => unreachable!(),
+            Potential::Wyvill => format!("(1 + min({q}, 1) * (-22/9 + min({q}, 1) * (17/9 - 4/9 * min({q}, 1))))"),
+            Potential::Rational { d } => format!("(pow(1 - min({q}, 1), 2) / (1 + {d} * min({q}, 1)))"),
+            Potential::InverseSquare => format!("(1 / max({q}, 1e-9))"),
+        };
+        write!(f, " - {} * {term}", c.strength).unwrap();
+        if c.strength > 0.0 {
+            lo = lo.min(c.center - Vec3::splat(c.radius * 3.0));
+            hi = hi.max(c.center + Vec3::splat(c.radius * 3.0));
+        }
+        gradient += 4.0 * c.strength.abs() / c.radius;
+    }
+    format!(
+        "isosurface {{ function {{ {f} }} threshold 0 contained_by {{ box {{ {}, {} }} }} max_gradient {gradient}",
+        v(lo),
+        v(hi)
+    )
 }
 
 fn mesh_sdl(name: &str, m: &TriangleMesh, smooth: bool) -> String {

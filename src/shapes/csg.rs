@@ -196,7 +196,7 @@ impl CompiledSolid {
                 }
                 self.program.push(Step::Leaf(self.leaves.len() as u16));
                 self.leaves.push(Leaf {
-                    prim: *p,
+                    prim: p.clone(),
                     to_object: m.inverse(),
                     normal_to_world: m.matrix3.inverse().transpose(),
                 });
@@ -253,9 +253,8 @@ impl CompiledSolid {
                     Step::Leaf(i) => {
                         let leaf = &self.leaves[i as usize];
                         let (lo, ld) = (leaf.to_object.transform_point3(o), leaf.to_object.transform_vector3(d));
-                        let (sp, n) = leaf.prim.spans(lo, ld, self.solver, i);
                         starts.push(out.len());
-                        out.extend_from_slice(&sp[..n]);
+                        leaf.prim.spans(lo, ld, self.solver, i, out);
                     }
                     Step::Op(op, n) => {
                         // Left to right: ((A op B) op C) …, as a difference needs.

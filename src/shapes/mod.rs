@@ -11,17 +11,21 @@
 //! answers each query from both, the second walk bounded by the first's hit — as Embree keeps one
 //! acceleration structure per geometry type in a scene (`AccelN`).
 
+mod blob;
 mod csg;
+mod interval;
 mod primitive;
 pub(crate) mod solid_tree;
 mod solve;
 pub(crate) mod sphere;
+mod superquadric;
 pub(crate) mod tree;
 
 use glam::Vec3;
 
 use crate::error::{Error, Result};
 use crate::geometry::MAX_COORDINATE;
+pub use blob::{Blob, BlobComponent, MAX_BLOB_COMPONENTS, Potential};
 pub use csg::{CSG_TOLERANCE, CsgOp, MAX_LEAVES, MAX_SOLID_DEPTH, PreparedSolid, Solid};
 pub use primitive::Primitive;
 pub use solve::{QuarticSolver, quadratic, quartic};

@@ -4,13 +4,18 @@
 //! object-space ray, which is not renormalized, so `t` is the world ray's parameter (the seeds'
 //! ellipsoid example).
 
+use std::sync::Arc;
+
 use glam::DVec3;
 
+use super::blob::{self, Blob};
+use super::interval::{self, Isolation};
 use super::solve::{self, QuarticSolver};
+use super::superquadric;
 
 /// A canonical shape in its object space (placed in the world by a [`Solid`](super::Solid)'s
 /// transform). Solids are closed: a point is inside or outside; the disc alone is a surface.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub enum Primitive {
     /// The unit sphere about the origin (an ellipsoid under a non-uniform scale).
     Sphere,
@@ -49,6 +54,18 @@ pub enum Primitive {
         /// `[A, B, C, D, E, F, G, H, I, J]`.
         coeffs: [f32; 10],
     },
+    /// The superellipsoid `(|x|^(2/e) + |y|^(2/e))^(e/n) + |z|^(2/n) ≤ 1` in `[−1, 1]³`
+    /// (POV-Ray's `superellipsoid { <e, n> }`): `e` shapes the cross-sections in xy, `n` the
+    /// profile along z; 1 and 1 give the sphere, small values a rounded box, 2 an octahedron,
+    /// larger ones pinched stars. Both in `[0.001, 1000]`. Crossings by interval root isolation.
+    Superellipsoid {
+        /// East–west exponent (the xy cross-sections).
+        e: f32,
+        /// North–south exponent (the profile along z).
+        n: f32,
+    },
+    /// A blob (metaballs) in its own space: see [`Blob`].
+    Blob(Arc<Blob>),
 }
 
 /// One end of a span: where the line crosses a leaf's surface, which leaf (its index in the
@@ -149,7 +166,31 @@ impl Primitive {
     /// The spans of the line `o + t d` (object space, any `d ≠ 0`) inside this primitive, over
     /// all `t` (also behind the ray's start: a ray may start inside). The disc gives its one
     /// crossing as a span of zero width.
-    pub(crate) fn spans(&self, o: DVec3, d: DVec3, solver: QuarticSolver, leaf: u16) -> Spans {
+    pub(crate) fn spans(&self, o: DVec3, d: DVec3, solver: QuarticSolver, leaf: u16, out: &mut Vec<Span>) {
+        match self {
+            Primitive::Superellipsoid { e, n } => {
+                let (e, n) = (*e as f64, *n as f64);
+                let Some(ch) = Chord::new(o, d, (DVec3::splat(-1.0), DVec3::ONE)) else { return };
+                let (p, u) = (ch.p, ch.u);
+                let range = |a, b| superquadric::range(e, n, p, u, a, b);
+                ch.spans(range, |t| superquadric::point(e, n, p, u, t), leaf, out);
+            }
+            Primitive::Blob(b) => blob::ACTIVE.with(|active| {
+                let Some(ch) = Chord::new(o, d, b.bounds()) else { return };
+                let mut active = active.borrow_mut();
+                b.activate(ch.p, ch.u, &mut active);
+                let active = &*active;
+                ch.spans(|lo, hi| b.range(active, lo, hi), |t| b.point(active, t), leaf, out);
+            }),
+            _ => {
+                let (s, k) = self.spans_fixed(o, d, solver, leaf);
+                out.extend_from_slice(&s[..k]);
+            }
+        }
+    }
+
+    /// The spans of the primitives with at most two of them.
+    fn spans_fixed(&self, o: DVec3, d: DVec3, solver: QuarticSolver, leaf: u16) -> Spans {
         match *self {
             Primitive::Sphere => {
                 // Ray Tracing Gems ch. 7: the discriminant from the distance of the line to the
@@ -227,6 +268,7 @@ impl Primitive {
                 quadratic_spans(a, b, self.field(o), leaf, 0)
             }
             Primitive::Torus { major, minor } => torus_spans(major as f64, minor as f64, o, d, solver, leaf),
+            Primitive::Superellipsoid { .. } | Primitive::Blob(_) => NONE,
         }
     }
 
@@ -261,6 +303,8 @@ impl Primitive {
                     + i * p.z
                     + j
             }
+            Primitive::Superellipsoid { e, n } => superquadric::field(e as f64, n as f64, p.to_array()),
+            Primitive::Blob(ref b) => b.field(p),
         }
     }
 
@@ -302,13 +346,18 @@ impl Primitive {
                     2.0 * c * p.z + e * p.x + f * p.y + i,
                 )
             }
+            Primitive::Superellipsoid { e, n } => superquadric::gradient(e as f64, n as f64, p),
+            Primitive::Blob(ref b) => b.gradient(p),
         }
     }
 
     /// Object-space bounds, or `None` for the unbounded plane and quadric.
     pub(crate) fn bounds(&self) -> Option<(DVec3, DVec3)> {
         match *self {
-            Primitive::Sphere | Primitive::Box => Some((DVec3::splat(-1.0), DVec3::ONE)),
+            Primitive::Sphere | Primitive::Box | Primitive::Superellipsoid { .. } => {
+                Some((DVec3::splat(-1.0), DVec3::ONE))
+            }
+            Primitive::Blob(ref b) => Some(b.bounds()),
             Primitive::Cylinder | Primitive::Cone { .. } => {
                 let (r0, r1) = self.cone_radii().unwrap_or((1.0, 1.0));
                 let r = r0.max(r1);
@@ -339,9 +388,96 @@ impl Primitive {
             Primitive::Quadric { coeffs } if coeffs[..9].iter().all(|&c| c == 0.0) => {
                 Some("quadric coefficients A to I are all zero: no surface".into())
             }
+            Primitive::Superellipsoid { e, n } if !((1e-3..=1e3).contains(&e) && (1e-3..=1e3).contains(&n)) => {
+                Some(format!("superellipsoid exponents {e} and {n}: both must lie in [0.001, 1000]"))
+            }
+            Primitive::Blob(ref b) => b.check(),
             _ => None,
         }
     }
+}
+
+/// The chord of a line through a shape's bounds, for root isolation: the origin moved to where
+/// the line enters (POV-Ray's practice), the direction made unit, so `t` is arc length there.
+struct Chord {
+    p: DVec3,
+    u: DVec3,
+    /// The ray parameter where the chord starts, and the chord's length.
+    t0: f64,
+    length: f64,
+    /// `|d|`: arc length per unit of the ray's parameter.
+    scale: f64,
+    /// The bounds' diagonal.
+    size: f64,
+}
+
+/// Root isolation stops splitting pieces of the chord thinner than this share of the shape's
+/// bounding diagonal (the CSG drops spans below 1e-6 of a solid's diagonal anyway).
+const ISOLATION_EPS: f64 = 1e-9;
+
+impl Chord {
+    fn new(o: DVec3, d: DVec3, (lo, hi): (DVec3, DVec3)) -> Option<Chord> {
+        // The box a little larger, so the chord's ends lie outside the shape.
+        let pad = 1e-9 * (hi - lo).max_element();
+        let (lo, hi) = (lo - pad, hi + pad);
+        let scale = d.length();
+        let u = d / scale;
+        let (mut t0, mut t1) = (f64::NEG_INFINITY, f64::INFINITY);
+        for k in 0..3 {
+            let (a, _, b, _) = slab(o[k], u[k], lo[k], hi[k], 0)?;
+            t0 = t0.max(a);
+            t1 = t1.min(b);
+        }
+        let size = (hi - lo).length();
+        (t0 < t1 && t0.is_finite() && t1.is_finite()).then(|| Chord {
+            p: o + t0 * u,
+            u,
+            t0,
+            length: t1 - t0,
+            scale,
+            size,
+        })
+    }
+
+    /// Appends the spans of the line inside the shape whose field (along the chord, from its
+    /// start) `range` bounds and `point` evaluates. A budget-exhausted isolation keeps what it
+    /// found: the rest of the chord counts as outside.
+    fn spans(
+        &self,
+        range: impl Fn(f64, f64) -> interval::Dual<interval::Iv>,
+        point: impl Fn(f64) -> interval::Dual<f64>,
+        leaf: u16,
+        out: &mut Vec<Span>,
+    ) {
+        ROOTS.with(|roots| {
+            let mut roots = roots.borrow_mut();
+            let eps = ISOLATION_EPS * self.size;
+            let _: Isolation = interval::isolate(&range, &point, 0.0, self.length, eps, &mut roots);
+            // Pieces between crossings, classified by the field at their middles.
+            let mut open: Option<f64> = None;
+            let mut prev = 0.0;
+            let to_ray = |s: f64| (self.t0 + s) / self.scale;
+            for &r in roots.iter().chain(std::iter::once(&self.length)) {
+                let inside = point(0.5 * (prev + r)).v <= 0.0;
+                match (inside, open) {
+                    (true, None) => open = Some(prev),
+                    (false, Some(start)) => {
+                        out.push(Span::new(to_ray(start), 0, to_ray(prev), 0, leaf));
+                        open = None;
+                    }
+                    _ => {}
+                }
+                prev = r;
+            }
+            if let Some(start) = open {
+                out.push(Span::new(to_ray(start), 0, to_ray(self.length), 0, leaf));
+            }
+        });
+    }
+}
+
+thread_local! {
+    static ROOTS: std::cell::RefCell<Vec<f64>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
 /// The torus's spans: the quartic `F(t) = G² − 4R²(x² + z²)`, `G = |p|² + R² − r²`, solved on
@@ -415,6 +551,82 @@ fn torus_spans(big: f64, small: f64, o: DVec3, d: DVec3, solver: QuarticSolver, 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::shapes::{BlobComponent, Potential};
+
+    fn spans_of(p: &Primitive, o: DVec3, d: DVec3) -> Vec<Span> {
+        let mut out = Vec::new();
+        p.spans(o, d, QuarticSolver::default(), 0, &mut out);
+        out
+    }
+
+    #[test]
+    fn the_unit_superellipsoid_is_the_sphere() {
+        let se = Primitive::Superellipsoid { e: 1.0, n: 1.0 };
+        for k in 0..2000 {
+            let a = k as f64 * 0.37;
+            let o = DVec3::new(a.cos() * 3.0, a.sin() * 2.0, (a * 0.7).sin());
+            let d = DVec3::new((a * 1.3).sin() * 0.9, (a * 2.1).cos() * 0.8, (a * 0.3).cos() * 0.5) - o;
+            let (x, y) = (spans_of(&se, o, d), spans_of(&Primitive::Sphere, o, d));
+            assert_eq!(x.len(), y.len(), "{o} {d} {x:?} {y:?}");
+            for (x, y) in x.iter().zip(&y) {
+                assert!((x.enter.t - y.enter.t).abs() < 1e-9 && (x.exit.t - y.exit.t).abs() < 1e-9, "{x:?} {y:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_lone_blob_ball_has_the_potentials_radius() {
+        // s·f(q) = T on the surface: solve f(q) = T/s for q by bisection (f falls on [0, 1]),
+        // independently of the interval solver; a ray through the centre spans [−r, r].
+        let (t, s, big_r) = (0.3f32 as f64, 1.0f64, 0.8f32 as f64);
+        for pot in [Potential::Pov, Potential::Wyvill, Potential::Rational { d: 3.0 }, Potential::InverseSquare] {
+            let f = |q: f64| match pot {
+                Potential::Pov => (1.0 - q).powi(2),
+                Potential::Wyvill => 1.0 - 22.0 / 9.0 * q + 17.0 / 9.0 * q * q - 4.0 / 9.0 * q * q * q,
+                Potential::Rational { d } => (1.0 - q).powi(2) / (1.0 + d as f64 * q),
+                Potential::InverseSquare => 1.0 / q,
+            };
+            let (mut lo, mut hi) = (1e-9, if pot == Potential::InverseSquare { 100.0 } else { 1.0 });
+            for _ in 0..200 {
+                let m = 0.5 * (lo + hi);
+                if s * f(m) > t { lo = m } else { hi = m }
+            }
+            let r = big_r * lo.sqrt();
+            let ball = BlobComponent { center: glam::Vec3::ZERO, radius: big_r as f32, strength: s as f32 };
+            let blob = Primitive::Blob(Arc::new(Blob::new(t as f32, pot, vec![ball])));
+            assert!(blob.check().is_none());
+            let sp = spans_of(&blob, DVec3::new(-5.0, 0.0, 0.0), DVec3::new(2.0, 0.0, 0.0));
+            assert_eq!(sp.len(), 1, "{pot:?} {sp:?}");
+            assert!((sp[0].enter.t - (5.0 - r) / 2.0).abs() < 1e-9, "{pot:?} {sp:?} r = {r}");
+            assert!((sp[0].exit.t - (5.0 + r) / 2.0).abs() < 1e-9, "{pot:?} {sp:?} r = {r}");
+            // The analytic gradient points outwards, radially.
+            let n = blob.normal(DVec3::new(r, 0.0, 0.0), 0);
+            assert!(n.x > 0.0 && n.y.abs() < 1e-12 && n.z.abs() < 1e-12, "{n}");
+        }
+    }
+
+    #[test]
+    fn superellipsoid_normals_match_central_differences() {
+        // The seeds' normal by differences, against the analytic gradient (automatic
+        // differentiation): at surface points of a rounded box and a pinched star.
+        for (e, n) in [(0.3, 0.5), (1.0, 1.0), (2.5, 3.0)] {
+            let se = Primitive::Superellipsoid { e, n };
+            let mut worst = 0.0f64;
+            for k in 0..500 {
+                let a = k as f64 * 0.731;
+                let d = DVec3::new(a.cos() * (a * 0.3).sin(), a.sin() * (a * 0.3).sin(), (a * 0.3).cos()) * 2.0;
+                let o = DVec3::new(0.01, -0.02, 0.015) - d;
+                let Some(s) = spans_of(&se, o, d).first().copied() else { continue };
+                let p = o + s.enter.t * d;
+                let g = se.normal(p, 0).normalize();
+                let c = superquadric::central_difference(|q| se.field(q), p).normalize();
+                if g.is_finite() && c.is_finite() {
+                    worst = worst.max(g.angle_between(c));
+                }
+            }
+            assert!(worst < 1e-3, "e {e} n {n}: worst angle {worst}");
+        }
+    }
 
     #[test]
     fn torus_solvers_find_the_same_crossings() {
@@ -429,8 +641,8 @@ mod tests {
         for _ in 0..20000 {
             let o = DVec3::new(rnd(), rnd(), rnd()).normalize() * 5.0;
             let d = DVec3::new(rnd(), rnd(), rnd()) * 1.3 - o;
-            let a = torus.spans(o, d, QuarticSolver::Ferrari, 0);
-            let b = torus.spans(o, d, QuarticSolver::Bracketed, 0);
+            let a = torus.spans_fixed(o, d, QuarticSolver::Ferrari, 0);
+            let b = torus.spans_fixed(o, d, QuarticSolver::Bracketed, 0);
             assert_eq!(a.1, b.1, "{o} {d} {a:?} {b:?}");
             for (x, y) in a.0[..a.1].iter().zip(&b.0[..b.1]) {
                 for (p, q) in [(x.enter.t, y.enter.t), (x.exit.t, y.exit.t)] {
