@@ -3,11 +3,13 @@
 //! material. Primitives take POV-Ray's parameters (a cylinder from `base` to `cap`, a plane by
 //! its `normal` and `offset`), turned here into a canonical [`Primitive`] and its placement.
 
+use std::sync::Arc;
+
 use glam::{Affine3A, Mat3, Vec3};
 use serde::Deserialize;
 
 use super::{Scale, placement};
-use crate::shapes::{CsgOp, MAX_SOLID_DEPTH, Primitive, Solid};
+use crate::shapes::{Blob, BlobComponent, CsgOp, MAX_SOLID_DEPTH, Potential, Primitive, Solid};
 
 /// One node of a solid tree, as written.
 #[derive(Deserialize)]
@@ -22,6 +24,8 @@ pub(super) struct RawSolid {
     plane: Option<RawPlane>,
     torus: Option<RawTorus>,
     quadric: Option<[f32; 10]>,
+    superellipsoid: Option<RawSuperellipsoid>,
+    blob: Option<RawBlob>,
     union: Option<Vec<RawSolid>>,
     intersection: Option<Vec<RawSolid>>,
     difference: Option<Vec<RawSolid>>,
@@ -98,6 +102,33 @@ struct RawTorus {
     minor: f32,
 }
 
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSuperellipsoid {
+    e: f32,
+    n: f32,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawBlob {
+    threshold: f32,
+    /// `"pov"` (the default), `"wyvill"`, `"rational"` (with `d`) or `"inverse_square"`.
+    #[serde(default)]
+    potential: Option<String>,
+    d: Option<f32>,
+    components: Vec<RawBlobComponent>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawBlobComponent {
+    center: [f32; 3],
+    radius: f32,
+    #[serde(default = "one")]
+    strength: f32,
+}
+
 fn one() -> f32 {
     1.0
 }
@@ -153,14 +184,16 @@ fn node(
         raw.plane.is_some(),
         raw.torus.is_some(),
         raw.quadric.is_some(),
+        raw.superellipsoid.is_some(),
+        raw.blob.is_some(),
         raw.union.is_some(),
         raw.intersection.is_some(),
         raw.difference.is_some(),
     ];
     if kinds.iter().filter(|&&k| k).count() != 1 {
         return Err(format!(
-            "{at}: needs exactly one of sphere, box, cylinder, cone, disc, plane, torus, quadric, union, \
-             intersection, difference"
+            "{at}: needs exactly one of sphere, box, cylinder, cone, disc, plane, torus, quadric, superellipsoid, \
+             blob, union, intersection, difference"
         ));
     }
     let bad = |what: String| Err(format!("{at}: {what}"));
@@ -226,6 +259,29 @@ fn node(
     } else if let Some(q) = raw.quadric {
         leaves.push(material.cloned());
         Solid::new(Primitive::Quadric { coeffs: q })
+    } else if let Some(se) = &raw.superellipsoid {
+        leaves.push(material.cloned());
+        Solid::new(Primitive::Superellipsoid { e: se.e, n: se.n })
+    } else if let Some(b) = &raw.blob {
+        let potential = match (b.potential.as_deref(), b.d) {
+            (None | Some("pov"), None) => Potential::Pov,
+            (Some("wyvill"), None) => Potential::Wyvill,
+            (Some("inverse_square"), None) => Potential::InverseSquare,
+            (Some("rational"), Some(d)) => Potential::Rational { d },
+            (Some("rational"), None) => return bad("blob potential \"rational\" needs its parameter d".into()),
+            (Some(p @ ("pov" | "wyvill" | "inverse_square")), Some(_)) => {
+                return bad(format!("only the rational blob potential takes d, not {p}"));
+            }
+            (None, Some(_)) => return bad("only the rational blob potential takes d".into()),
+            (Some(p), _) => return bad(format!("blob potential {p:?}: use pov, wyvill, rational or inverse_square")),
+        };
+        let components = b
+            .components
+            .iter()
+            .map(|c| BlobComponent { center: v(c.center), radius: c.radius, strength: c.strength })
+            .collect();
+        leaves.push(material.cloned());
+        Solid::new(Primitive::Blob(Arc::new(Blob::new(b.threshold, potential, components))))
     } else {
         let (op, operands) = match (&raw.union, &raw.intersection, &raw.difference) {
             (Some(o), _, _) => (CsgOp::Union, o),
