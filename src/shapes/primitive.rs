@@ -441,7 +441,7 @@ impl Chord {
 
     /// Appends the spans of the line inside the shape whose field (along the chord, from its
     /// start) `range` bounds and `point` evaluates. A budget-exhausted isolation keeps what it
-    /// found: the rest of the chord counts as outside.
+    /// found: the chord keeps the side of its last crossing found to its end.
     fn spans(
         &self,
         range: impl Fn(f64, f64) -> interval::Dual<interval::Iv>,
@@ -449,35 +449,29 @@ impl Chord {
         leaf: u16,
         out: &mut Vec<Span>,
     ) {
-        ROOTS.with(|roots| {
-            let mut roots = roots.borrow_mut();
+        ISOLATION.with(|scratch| {
+            let mut scratch = scratch.borrow_mut();
             let eps = ISOLATION_EPS * self.size;
-            let _: Isolation = interval::isolate(&range, &point, 0.0, self.length, eps, &mut roots);
-            // Pieces between crossings, classified by the field at their middles.
-            let mut open: Option<f64> = None;
+            let _: Isolation = interval::isolate(&range, &point, 0.0, self.length, eps, &mut scratch);
+            let roots = &scratch.roots;
+            // Every root isolated is a change of sign (the pieces' ends are evaluated once and
+            // shared), so the pieces between them alternate from the start's side.
+            let mut inside = point(0.0).v <= 0.0;
             let mut prev = 0.0;
             let to_ray = |s: f64| (self.t0 + s) / self.scale;
             for &r in roots.iter().chain(std::iter::once(&self.length)) {
-                let inside = point(0.5 * (prev + r)).v <= 0.0;
-                match (inside, open) {
-                    (true, None) => open = Some(prev),
-                    (false, Some(start)) => {
-                        out.push(Span::new(to_ray(start), 0, to_ray(prev), 0, leaf));
-                        open = None;
-                    }
-                    _ => {}
+                if inside {
+                    out.push(Span::new(to_ray(prev), 0, to_ray(r), 0, leaf));
                 }
+                inside = !inside;
                 prev = r;
-            }
-            if let Some(start) = open {
-                out.push(Span::new(to_ray(start), 0, to_ray(self.length), 0, leaf));
             }
         });
     }
 }
 
 thread_local! {
-    static ROOTS: std::cell::RefCell<Vec<f64>> = const { std::cell::RefCell::new(Vec::new()) };
+    static ISOLATION: std::cell::RefCell<interval::IsolationScratch> = std::cell::RefCell::new(Default::default());
 }
 
 /// The torus's spans: the quartic `F(t) = G² − 4R²(x² + z²)`, `G = |p|² + R² − r²`, solved on

@@ -6,12 +6,15 @@ use glam::DVec3;
 
 use super::interval::{Dual, Iv, Real};
 
-/// The field `(|x|^(2/e) + |y|^(2/e))^(e/n) + |z|^(2/n) − 1`, negative inside, written once
-/// for points, bounds and derivatives. POV-Ray evaluates the same surface in a homogeneous form.
+/// The field of `(|x|^(2/e) + |y|^(2/e))^(e/n) + |z|^(2/n) ≤ 1`, negative inside, written once
+/// for points, bounds and derivatives: in the homogeneous form POV-Ray evaluates,
+/// `((|x|^a + |y|^a)^(c/a) + |z|^c)^(1/c) − 1` with `a = 2/e`, `c = 2/n`, which grows like
+/// distance along a ray (a norm, for `e, n ≤ 2`), so Newton converges in a few steps even for
+/// the large exponents of a rounded box (on `|z|^10 − 1` it crawls: measured 18 steps a root).
 #[inline(always)]
 pub(crate) fn field<T: Real>(e: f64, n: f64, [x, y, z]: [T; 3]) -> T {
-    let a = 2.0 / e;
-    (x.abs().powf(a) + y.abs().powf(a)).powf(e / n) + z.abs().powf(2.0 / n) - T::c(1.0)
+    let (a, c) = (2.0 / e, 2.0 / n);
+    ((x.abs().powf(a) + y.abs().powf(a)).powf(c / a) + z.abs().powf(c)).powf(1.0 / c) - T::c(1.0)
 }
 
 /// Bounds of the field and its derivative along `o + t u` over `t ∈ [a, b]`.
