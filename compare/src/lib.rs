@@ -15,6 +15,7 @@ pub mod accuracy;
 pub mod embree;
 pub mod fuzz;
 pub mod harness;
+pub mod implicit;
 pub mod kernel;
 pub mod methods;
 pub mod povray;

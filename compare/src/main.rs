@@ -83,6 +83,11 @@ struct Args {
     /// torus.json and torus_solvers.png to --out, then exits.
     #[arg(long)]
     torus: bool,
+    /// Implicit shapes (issue 30): strahl's interval root isolation against marching with
+    /// 8–512 steps on superellipsoids and a blob, speed against accuracy (camera and grazing
+    /// rays); writes implicit.md, implicit.json and implicit_solvers.png to --out, then exits.
+    #[arg(long)]
+    implicit: bool,
     /// Internal: redraw --spheres' two charts into --out from its spheres.json, without measuring.
     #[arg(long, hide = true)]
     spheres_charts_from: Option<PathBuf>,
@@ -161,6 +166,11 @@ fn main() -> anyhow::Result<()> {
     if let Some(json) = &args.spheres_charts_from {
         let r: compare::spheres::SphereReport = serde_json::from_slice(&std::fs::read(json)?)?;
         return compare::spheres::charts(&args.out, &r);
+    }
+    if args.implicit {
+        let r = compare::implicit::run(args.width as usize, args.passes, &pool, &args.out)?;
+        print!("{}", compare::implicit::markdown(&r));
+        return Ok(());
     }
     if args.torus {
         let r = compare::torus::run(args.width as usize, args.passes, &pool, &args.out)?;

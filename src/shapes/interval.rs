@@ -371,12 +371,17 @@ pub(crate) fn isolate(
 }
 
 /// The crossing in `[a, b]` where the field's sign changes (`fa` its value at `a`): safeguarded
-/// Newton, bisecting whenever a step leaves the bracket; at most 100 steps.
+/// Newton, bisecting whenever a step leaves the bracket. A Newton step shorter than the
+/// tolerance is lengthened to it, so that the next value closes the bracket around the root; if
+/// it does not (a cusp, where the slope is infinite and the steps vanish far from any root: the
+/// pinched superellipsoid's edges), a bisection follows. Returns the middle of a bracket no
+/// wider than the tolerance; at most 200 steps.
 fn refine(point: &impl Fn(f64) -> Dual<f64>, a: f64, fa: f64, b: f64) -> f64 {
     let inside_a = fa <= 0.0;
     let (mut lo, mut hi) = (a, b);
     let mut t = 0.5 * (a + b);
-    for _ in 0..100 {
+    let mut bisect = false;
+    for _ in 0..200 {
         let f = point(t);
         if f.v == 0.0 {
             return t;
@@ -386,15 +391,22 @@ fn refine(point: &impl Fn(f64) -> Dual<f64>, a: f64, fa: f64, b: f64) -> f64 {
         } else {
             hi = t;
         }
-        let step = f.v / f.d;
-        let next = t - step;
-        let next = if next > lo && next < hi { next } else { 0.5 * (lo + hi) };
-        if (next - t).abs() <= 1e-15 * (1.0 + t.abs()) || hi - lo <= 1e-15 * (1.0 + t.abs()) {
-            return next;
+        let tol = 1e-14 * (1.0 + t.abs());
+        if hi - lo <= tol {
+            break;
         }
-        t = next;
+        let newton = t - f.v / f.d;
+        t = if bisect || !(newton > lo && newton < hi) {
+            bisect = false;
+            0.5 * (lo + hi)
+        } else if (newton - t).abs() < tol {
+            bisect = true;
+            (t + tol.copysign(newton - t)).clamp(lo, hi)
+        } else {
+            newton
+        };
     }
-    t
+    0.5 * (lo + hi)
 }
 
 #[cfg(test)]

@@ -272,8 +272,10 @@ impl Primitive {
         }
     }
 
-    /// The implicit function, negative inside (for the torus, the quadric and tests).
-    pub(crate) fn field(&self, p: DVec3) -> f64 {
+    /// The implicit function at the object-space point `p`: negative inside, positive outside,
+    /// 0 on the surface (not a distance; for the disc, 1 everywhere). For other root finders
+    /// to be compared with strahl's (the harness's sampling marcher).
+    pub fn field(&self, p: DVec3) -> f64 {
         match *self {
             Primitive::Sphere => p.dot(p) - 1.0,
             Primitive::Box => p.abs().max_element() - 1.0,
