@@ -9,6 +9,7 @@ use std::cell::RefCell;
 
 use glam::{DVec3, Vec3};
 
+use super::csg::dvec;
 use super::interval::{Dual, Iv, Real};
 use crate::geometry::MAX_COORDINATE;
 
@@ -176,7 +177,7 @@ impl Blob {
     fn compute_bounds(&self) -> (DVec3, DVec3) {
         let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
         for c in self.components.iter().filter(|c| c.strength > 0.0) {
-            let p = crate::shapes::csg::dvec(c.center);
+            let p = dvec(c.center);
             let r = self.reach(c);
             lo = lo.min(p - r);
             hi = hi.max(p + r);
@@ -188,7 +189,7 @@ impl Blob {
     pub(crate) fn field_dual(&self, p: DVec3, dp: DVec3) -> Dual<f64> {
         let mut sum = Dual::c(0.0);
         for c in &self.components {
-            let w = p - crate::shapes::csg::dvec(c.center);
+            let w = p - dvec(c.center);
             let inv = 1.0 / (c.radius as f64 * c.radius as f64);
             let q = Dual { v: w.dot(w) * inv, d: 2.0 * w.dot(dp) * inv };
             sum = sum + Dual::c(c.strength as f64) * self.potential.eval(q);
@@ -211,7 +212,7 @@ impl Blob {
     pub(crate) fn activate(&self, p: DVec3, u: DVec3, out: &mut Vec<Active>) {
         out.clear();
         for c in &self.components {
-            let w = p - crate::shapes::csg::dvec(c.center);
+            let w = p - dvec(c.center);
             let (w2, wu) = (w.dot(w), w.dot(u));
             let inv_r2 = 1.0 / (c.radius as f64 * c.radius as f64);
             let strength = c.strength as f64;

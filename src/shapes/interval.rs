@@ -460,4 +460,23 @@ mod tests {
         assert_eq!(done, Isolation::Complete);
         assert!(scratch.roots.is_empty(), "{:?}", scratch.roots);
     }
+
+    #[test]
+    fn refinement_crosses_cusps_and_budgets_end_wild_fields() {
+        // |t − 0.3|^(1/3)·sign − 1e-6: an infinite slope next to the root, where Newton's steps
+        // vanish; the bracket must still close on the root.
+        let f = |t: f64| {
+            let x = t - 0.3;
+            Dual { v: x.abs().powf(1.0 / 3.0).copysign(x) - 1e-6, d: x.abs().powf(-2.0 / 3.0) / 3.0 }
+        };
+        let r = refine(&f, 0.0, f(0.0).v, 1.0);
+        assert!((r - (0.3 + 1e-18)).abs() < 1e-13, "{r}");
+        // A field crossing zero 20,000 times: the budget ends the isolation, reported.
+        let wild = |t: f64| Dual { v: (t * 4e4 * std::f64::consts::PI).sin(), d: 1.0 };
+        let range = |_: f64, _: f64| Dual { v: Iv::new(-1.0, 1.0), d: Iv::new(-1.0, 1.0) };
+        let mut scratch = IsolationScratch::default();
+        let done = isolate(range, wild, 0.0, 1.0, 1e-12, &mut scratch);
+        assert_eq!(done, Isolation::BudgetExhausted);
+        assert!(scratch.roots.len() < ISOLATION_BUDGET, "{}", scratch.roots.len());
+    }
 }
