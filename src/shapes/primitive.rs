@@ -404,7 +404,7 @@ impl Primitive {
 struct Chord {
     p: DVec3,
     u: DVec3,
-    /// The ray parameter where the chord starts, and the chord's length.
+    /// Arc length from `o` along `u` to where the chord starts, and the chord's length.
     t0: f64,
     length: f64,
     /// `|d|`: arc length per unit of the ray's parameter.

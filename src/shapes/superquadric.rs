@@ -10,7 +10,8 @@ use super::interval::{Dual, Iv, Real};
 /// for points, bounds and derivatives: in the homogeneous form POV-Ray evaluates,
 /// `((|x|^a + |y|^a)^(c/a) + |z|^c)^(1/c) − 1` with `a = 2/e`, `c = 2/n`, which grows like
 /// distance along a ray (a norm, for `e, n ≤ 2`), so Newton converges in a few steps even for
-/// the large exponents of a rounded box (on `|z|^10 − 1` it crawls: measured 18 steps a root).
+/// the large exponents of a rounded box: measured on 2,000 rays at e = n = 0.2, 7.7 point
+/// evaluations a root (split points and Newton steps) against 18.6 on the plain form.
 #[inline(always)]
 pub(crate) fn field<T: Real>(e: f64, n: f64, [x, y, z]: [T; 3]) -> T {
     let (a, c) = (2.0 / e, 2.0 / n);
