@@ -29,8 +29,9 @@ use crate::shapes::{
 const MAGIC: &[u8; 8] = b"STRAHLSC";
 /// Format version; bumped whenever the layout of nodes, blocks or this format changes. Version 2
 /// appends the sphere sets (their tree is rebuilt on reading), version 3 the solids (likewise),
-/// version 4 adds the superellipsoid and blob primitives; older bytes still read.
-const VERSION: u32 = 4;
+/// version 4 adds the superellipsoid and blob primitives, version 5 the ratioquadric,
+/// super-toroid and super-hyperboloid; older bytes still read.
+const VERSION: u32 = 5;
 /// Deepest solid tree the reader accepts (the builder's own limit, [`MAX_SOLID_DEPTH`]).
 const MAX_SOLID_READ_DEPTH: usize = MAX_SOLID_DEPTH;
 /// Deepest wide level a built tree reaches (`MEDIAN_DEPTH` SAH levels, then at most 32 median
@@ -312,6 +313,20 @@ fn primitive_code(p: &Primitive) -> (u8, [f32; 10]) {
             a[..2].copy_from_slice(&[e, n]);
             8
         }
+        Primitive::Ratioquadric { p, q, r } => {
+            a[..3].copy_from_slice(&[p, q, r]);
+            10
+        }
+        Primitive::Supertoroid { major, minor, e, n } => {
+            a[..4].copy_from_slice(&[major, minor, e, n]);
+            11
+        }
+        Primitive::Superhyperboloid { e, n, sheets, height } => {
+            a[..3].copy_from_slice(&[e, n, height]);
+            // The sheet count as a float, so that it stays in the parameter block.
+            a[3] = sheets as f32;
+            12
+        }
         Primitive::Blob(ref b) => {
             a[0] = b.threshold();
             if let Potential::Rational { d } = b.potential() {
@@ -359,6 +374,8 @@ fn read_solid(r: &mut Reader, depth: usize) -> Result<Solid> {
             let used = match (kind, potential) {
                 (3 | 6 | 8, _) | (9, Some(Potential::Rational { .. })) => 2,
                 (9, _) => 1,
+                (10, _) => 3,
+                (11 | 12, _) => 4,
                 (7, _) => 10,
                 _ => 0,
             };
@@ -375,6 +392,13 @@ fn read_solid(r: &mut Reader, depth: usize) -> Result<Solid> {
                 6 => Primitive::Torus { major: a[0], minor: a[1] },
                 7 => Primitive::Quadric { coeffs: a },
                 8 => Primitive::Superellipsoid { e: a[0], n: a[1] },
+                10 => Primitive::Ratioquadric { p: a[0], q: a[1], r: a[2] },
+                11 => Primitive::Supertoroid { major: a[0], minor: a[1], e: a[2], n: a[3] },
+                12 => {
+                    // Any other count is refused by the solid's check, like any bad parameter.
+                    let sheets = if a[3] == 1.0 || a[3] == 2.0 { a[3] as u8 } else { 0 };
+                    Primitive::Superhyperboloid { e: a[0], n: a[1], sheets, height: a[2] }
+                }
                 9 => {
                     let n = r.count(20)?;
                     let mut components = Vec::with_capacity(n);

@@ -87,6 +87,35 @@ fn gallery() -> Vec<Solid> {
         placed(blob(Potential::Wyvill), Vec3::ONE, 1.0, Vec3::new(0.0, -3.0, 3.0)),
         placed(blob(Potential::Rational { d: 2.0 }), Vec3::splat(0.8), 1.7, Vec3::new(-3.0, 3.0, 3.0)),
         placed(blob(Potential::InverseSquare), Vec3::ONE, 2.2, Vec3::new(3.0, 3.0, 3.0)),
+        // Super-toroids: a squared ring, and a pinched one (thin edges).
+        placed(
+            Primitive::Supertoroid { major: 1.0, minor: 0.35, e: 0.3, n: 0.4 },
+            Vec3::ONE,
+            0.6,
+            Vec3::new(-3.0, 0.0, -3.0),
+        ),
+        placed(
+            Primitive::Supertoroid { major: 1.0, minor: 0.3, e: 2.2, n: 2.5 },
+            Vec3::ONE,
+            1.4,
+            Vec3::new(3.0, 0.0, -3.0),
+        ),
+        // Super-hyperboloids of one and two sheets.
+        placed(
+            Primitive::Superhyperboloid { e: 0.5, n: 1.5, sheets: 1, height: 1.0 },
+            Vec3::splat(0.8),
+            0.2,
+            Vec3::new(0.0, 3.0, -3.0),
+        ),
+        placed(
+            Primitive::Superhyperboloid { e: 1.5, n: 0.7, sheets: 2, height: 1.8 },
+            Vec3::splat(0.7),
+            2.4,
+            Vec3::new(0.0, -3.0, -3.0),
+        ),
+        // Ratioquadrics: a pinched star (rounded tips) and a rounded box.
+        placed(Primitive::Ratioquadric { p: 0.05, q: 0.2, r: 0.1 }, Vec3::ONE, 0.9, Vec3::new(-3.0, 3.0, -3.0)),
+        placed(Primitive::Ratioquadric { p: 8.0, q: 8.0, r: 3.0 }, Vec3::ONE, 1.9, Vec3::new(3.0, 3.0, -3.0)),
     ]
 }
 
@@ -283,6 +312,16 @@ fn bad_solids_are_typed_errors() {
     bad(Solid::new(Primitive::Quadric { coeffs: [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0] }));
     bad(Solid::new(Primitive::Superellipsoid { e: 0.0, n: 1.0 }));
     bad(Solid::new(Primitive::Superellipsoid { e: 1.0, n: f32::NAN }));
+    bad(Solid::new(Primitive::Supertoroid { major: 1.0, minor: 1.0, e: 1.0, n: 1.0 }));
+    bad(Solid::new(Primitive::Supertoroid { major: 1.0, minor: 0.5, e: 0.001, n: 1.0 }));
+    // Within the exponents' range, but (major + minor)^(2/e) overflows float64's bounds.
+    bad(Solid::new(Primitive::Supertoroid { major: 1e6, minor: 0.5, e: 0.01, n: 1.0 }));
+    bad(Solid::new(Primitive::Superhyperboloid { e: 1.0, n: 1.0, sheets: 3, height: 1.0 }));
+    bad(Solid::new(Primitive::Superhyperboloid { e: 1.0, n: 1.0, sheets: 2, height: 1.0 }));
+    bad(Solid::new(Primitive::Superhyperboloid { e: 1.0, n: 1.0, sheets: 1, height: f32::INFINITY }));
+    bad(Solid::new(Primitive::Superhyperboloid { e: f32::NAN, n: 1.0, sheets: 1, height: 1.0 }));
+    bad(Solid::new(Primitive::Ratioquadric { p: 0.0, q: 1.0, r: 1.0 }));
+    bad(Solid::new(Primitive::Ratioquadric { p: 1.0, q: 1e4, r: 1.0 }));
     let ball = |radius: f32, strength: f32| BlobComponent { center: Vec3::ZERO, radius, strength };
     let blob = |t: f32, p: Potential, c: Vec<BlobComponent>| Solid::new(Primitive::Blob(Arc::new(Blob::new(t, p, c))));
     bad(blob(0.5, Potential::Pov, vec![]));

@@ -25,6 +25,9 @@ pub(super) struct RawSolid {
     torus: Option<RawTorus>,
     quadric: Option<[f32; 10]>,
     superellipsoid: Option<RawSuperellipsoid>,
+    supertoroid: Option<RawSupertoroid>,
+    superhyperboloid: Option<RawSuperhyperboloid>,
+    ratioquadric: Option<RawRatioquadric>,
     blob: Option<RawBlob>,
     union: Option<Vec<RawSolid>>,
     intersection: Option<Vec<RawSolid>>,
@@ -111,6 +114,37 @@ struct RawSuperellipsoid {
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
+struct RawSupertoroid {
+    major: f32,
+    minor: f32,
+    #[serde(default = "one")]
+    e: f32,
+    #[serde(default = "one")]
+    n: f32,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSuperhyperboloid {
+    #[serde(default = "one")]
+    e: f32,
+    #[serde(default = "one")]
+    n: f32,
+    #[serde(default = "one_sheet")]
+    sheets: u8,
+    height: f32,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawRatioquadric {
+    p: f32,
+    q: f32,
+    r: f32,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
 struct RawBlob {
     threshold: f32,
     /// `"pov"` (the default), `"wyvill"`, `"rational"` (with `d`) or `"inverse_square"`.
@@ -131,6 +165,9 @@ struct RawBlobComponent {
 
 fn one() -> f32 {
     1.0
+}
+fn one_sheet() -> u8 {
+    1
 }
 fn ones() -> [f32; 3] {
     [1.0; 3]
@@ -185,6 +222,9 @@ fn node(
         raw.torus.is_some(),
         raw.quadric.is_some(),
         raw.superellipsoid.is_some(),
+        raw.supertoroid.is_some(),
+        raw.superhyperboloid.is_some(),
+        raw.ratioquadric.is_some(),
         raw.blob.is_some(),
         raw.union.is_some(),
         raw.intersection.is_some(),
@@ -193,7 +233,7 @@ fn node(
     if kinds.iter().filter(|&&k| k).count() != 1 {
         return Err(format!(
             "{at}: needs exactly one of sphere, box, cylinder, cone, disc, plane, torus, quadric, superellipsoid, \
-             blob, union, intersection, difference"
+             supertoroid, superhyperboloid, ratioquadric, blob, union, intersection, difference"
         ));
     }
     let bad = |what: String| Err(format!("{at}: {what}"));
@@ -262,6 +302,15 @@ fn node(
     } else if let Some(se) = &raw.superellipsoid {
         leaves.push(material.cloned());
         Solid::new(Primitive::Superellipsoid { e: se.e, n: se.n })
+    } else if let Some(t) = &raw.supertoroid {
+        leaves.push(material.cloned());
+        Solid::new(Primitive::Supertoroid { major: t.major, minor: t.minor, e: t.e, n: t.n })
+    } else if let Some(h) = &raw.superhyperboloid {
+        leaves.push(material.cloned());
+        Solid::new(Primitive::Superhyperboloid { e: h.e, n: h.n, sheets: h.sheets, height: h.height })
+    } else if let Some(q) = &raw.ratioquadric {
+        leaves.push(material.cloned());
+        Solid::new(Primitive::Ratioquadric { p: q.p, q: q.q, r: q.r })
     } else if let Some(b) = &raw.blob {
         let potential = match (b.potential.as_deref(), b.d) {
             (None | Some("pov"), None) => Potential::Pov,

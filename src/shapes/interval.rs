@@ -62,6 +62,14 @@ pub(crate) trait Real:
     fn recip(self) -> Self;
     /// The hull with 0 (for the derivative of `min` where both sides are taken).
     fn with_zero(self) -> Self;
+    /// `max(a, b)` of two (value, derivative) pairs: the larger one's derivative, the hull of
+    /// both where an interval cannot tell which is larger.
+    fn max_dual(a: (Self, Self), b: (Self, Self)) -> (Self, Self);
+    /// `max(self, o)`.
+    #[inline(always)]
+    fn max(self, o: Self) -> Self {
+        Self::max_dual((self, self), (o, o)).0
+    }
 }
 
 impl Real for f64 {
@@ -103,6 +111,10 @@ impl Real for f64 {
     #[inline(always)]
     fn with_zero(self) -> Self {
         self
+    }
+    #[inline(always)]
+    fn max_dual(a: (Self, Self), b: (Self, Self)) -> (Self, Self) {
+        if a.0 >= b.0 || b.0.is_nan() { a } else { b }
     }
 }
 
@@ -193,6 +205,17 @@ impl Real for Iv {
     fn with_zero(self) -> Self {
         Iv { lo: self.lo.min(0.0), hi: self.hi.max(0.0) }
     }
+    #[inline(always)]
+    fn max_dual(a: (Self, Self), b: (Self, Self)) -> (Self, Self) {
+        if a.0.lo >= b.0.hi {
+            a
+        } else if b.0.lo >= a.0.hi {
+            b
+        } else {
+            let v = Iv { lo: a.0.lo.max(b.0.lo), hi: a.0.hi.max(b.0.hi) };
+            (v, Iv { lo: a.1.lo.min(b.1.lo), hi: a.1.hi.max(b.1.hi) })
+        }
+    }
 }
 
 /// A value and its derivative along one direction (forward-mode automatic differentiation):
@@ -274,6 +297,12 @@ impl<T: Real> Real for Dual<T> {
     #[inline(always)]
     fn with_zero(self) -> Self {
         Dual { v: self.v.with_zero(), d: self.d.with_zero() }
+    }
+    #[inline(always)]
+    fn max_dual(a: (Self, Self), b: (Self, Self)) -> (Self, Self) {
+        // Nested duals are not used: only the value pair is taken through.
+        let (v, d) = T::max_dual((a.0.v, a.0.d), (b.0.v, b.0.d));
+        (Dual { v, d }, Dual::c(0.0))
     }
 }
 

@@ -11,7 +11,7 @@ use glam::DVec3;
 use super::blob::{self, Blob};
 use super::interval::{self, Isolation};
 use super::solve::{self, QuarticSolver};
-use super::superquadric;
+use super::superquadric::Super;
 
 /// A canonical shape in its object space (placed in the world by a [`Solid`](super::Solid)'s
 /// transform). Solids are closed: a point is inside or outside; the disc alone is a surface.
@@ -63,6 +63,50 @@ pub enum Primitive {
         e: f32,
         /// North–south exponent (the profile along z).
         n: f32,
+    },
+    /// Barr's super-toroid about the y axis (the torus's orientation): the points whose
+    /// distance-like `((|x|^(2/e) + |z|^(2/e))^(e/2) − major, y)` measured in the `2/n` norm is
+    /// at most `minor`; `e = n = 1` is the ring torus, small exponents square the tube and the
+    /// ring. `0 < minor < major`; exponents in `[0.01, 100]`. Crossings by interval root
+    /// isolation.
+    Supertoroid {
+        /// Radius of the tube's centre line.
+        major: f32,
+        /// Radius of the tube.
+        minor: f32,
+        /// Exponent of the ring's shape in xz.
+        e: f32,
+        /// Exponent of the tube's cross-section.
+        n: f32,
+    },
+    /// Barr's super-hyperboloid about the z axis, cut to `|z| ≤ height` (so it is a bounded
+    /// solid): one sheet `ρ^(2/n) ≤ 1 + |z|^(2/n)` (a waisted tower), or two sheets
+    /// `|z|^(2/n) ≥ 1 + ρ^(2/n)` (two caps, `height > 1`), where `ρ = (|x|^(2/e) +
+    /// |y|^(2/e))^(e/2)`; `e = n = 1` gives the quadric hyperboloids. Exponents in
+    /// `[0.01, 100]`. Crossings by interval root isolation.
+    Superhyperboloid {
+        /// Exponent of the cross-sections in xy.
+        e: f32,
+        /// Exponent of the profile along z.
+        n: f32,
+        /// 1 or 2.
+        sheets: u8,
+        /// Half the height the shape is cut to.
+        height: f32,
+    },
+    /// Blanc & Schlick's (1996) ratioquadric `g_p(x²) + g_q(y²) + g_r(z²) ≤ 1` in `[−1, 1]³`,
+    /// with the seeds' pseudo-power `g_p(u) = u / (p + (1 − p) u)` standing in for `|x|^p`
+    /// (`g_p(0) = 0`, `g_p(1) = 1`, below the diagonal for `p > 1`, above it for `p < 1`):
+    /// rational, so cheaper than powers, and smooth where `|x|^p` has cusps. 1 gives the
+    /// sphere, large values a rounded box, small ones pinched stars (with rounded tips). Each in
+    /// `[0.001, 1000]`. POV-Ray has no ratioquadric; its export is an isosurface.
+    Ratioquadric {
+        /// Exponent along x.
+        p: f32,
+        /// Exponent along y.
+        q: f32,
+        /// Exponent along z.
+        r: f32,
     },
     /// A blob (metaballs) in its own space: see [`Blob`].
     Blob(Arc<Blob>),
@@ -168,12 +212,14 @@ impl Primitive {
     /// crossing as a span of zero width.
     pub(crate) fn spans(&self, o: DVec3, d: DVec3, solver: QuarticSolver, leaf: u16, out: &mut Vec<Span>) {
         match self {
-            Primitive::Superellipsoid { e, n } => {
-                let (e, n) = (*e as f64, *n as f64);
-                let Some(ch) = Chord::new(o, d, (DVec3::splat(-1.0), DVec3::ONE)) else { return };
+            Primitive::Superellipsoid { .. }
+            | Primitive::Supertoroid { .. }
+            | Primitive::Superhyperboloid { .. }
+            | Primitive::Ratioquadric { .. } => {
+                let Some(sq) = Super::of(self) else { return };
+                let Some(ch) = Chord::new(o, d, sq.bounds()) else { return };
                 let (p, u) = (ch.p, ch.u);
-                let range = |a, b| superquadric::range(e, n, p, u, a, b);
-                ch.spans(range, |t| superquadric::point(e, n, p, u, t), leaf, out);
+                ch.spans(|a, b| sq.range(p, u, a, b), |t| sq.point(p, u, t), leaf, out);
             }
             Primitive::Blob(b) => blob::ACTIVE.with(|active| {
                 let Some(ch) = Chord::new(o, d, b.bounds()) else { return };
@@ -268,7 +314,11 @@ impl Primitive {
                 quadratic_spans(a, b, self.field(o), leaf, 0)
             }
             Primitive::Torus { major, minor } => torus_spans(major as f64, minor as f64, o, d, solver, leaf),
-            Primitive::Superellipsoid { .. } | Primitive::Blob(_) => NONE,
+            Primitive::Superellipsoid { .. }
+            | Primitive::Supertoroid { .. }
+            | Primitive::Superhyperboloid { .. }
+            | Primitive::Ratioquadric { .. }
+            | Primitive::Blob(_) => NONE,
         }
     }
 
@@ -305,7 +355,10 @@ impl Primitive {
                     + i * p.z
                     + j
             }
-            Primitive::Superellipsoid { e, n } => superquadric::field(e as f64, n as f64, p.to_array()),
+            Primitive::Superellipsoid { .. }
+            | Primitive::Supertoroid { .. }
+            | Primitive::Superhyperboloid { .. }
+            | Primitive::Ratioquadric { .. } => Super::of(self).map_or(1.0, |s| s.field(p.to_array())),
             Primitive::Blob(ref b) => b.field(p),
         }
     }
@@ -348,7 +401,10 @@ impl Primitive {
                     2.0 * c * p.z + e * p.x + f * p.y + i,
                 )
             }
-            Primitive::Superellipsoid { e, n } => superquadric::gradient(e as f64, n as f64, p),
+            Primitive::Superellipsoid { .. }
+            | Primitive::Supertoroid { .. }
+            | Primitive::Superhyperboloid { .. }
+            | Primitive::Ratioquadric { .. } => Super::of(self).map_or(DVec3::Z, |s| s.gradient(p)),
             Primitive::Blob(ref b) => b.gradient(p),
         }
     }
@@ -356,9 +412,11 @@ impl Primitive {
     /// Object-space bounds, or `None` for the unbounded plane and quadric.
     pub(crate) fn bounds(&self) -> Option<(DVec3, DVec3)> {
         match *self {
-            Primitive::Sphere | Primitive::Box | Primitive::Superellipsoid { .. } => {
-                Some((DVec3::splat(-1.0), DVec3::ONE))
-            }
+            Primitive::Sphere | Primitive::Box => Some((DVec3::splat(-1.0), DVec3::ONE)),
+            Primitive::Superellipsoid { .. }
+            | Primitive::Supertoroid { .. }
+            | Primitive::Superhyperboloid { .. }
+            | Primitive::Ratioquadric { .. } => Super::of(self).map(|s| s.bounds()),
             Primitive::Blob(ref b) => Some(b.bounds()),
             Primitive::Cylinder | Primitive::Cone { .. } => {
                 let (r0, r1) = self.cone_radii().unwrap_or((1.0, 1.0));
@@ -393,10 +451,49 @@ impl Primitive {
             Primitive::Superellipsoid { e, n } if !((1e-3..=1e3).contains(&e) && (1e-3..=1e3).contains(&n)) => {
                 Some(format!("superellipsoid exponents {e} and {n}: both must lie in [0.001, 1000]"))
             }
+            Primitive::Supertoroid { major, minor, e, n } => {
+                let ok = minor > 0.0 && minor < major && major.is_finite() && exponents_ok([e, n], 0.01, 100.0);
+                (!ok || !powers_fit(self, [e, n])).then(|| {
+                    format!(
+                        "supertoroid radii {major}, {minor} and exponents {e}, {n}: need 0 < minor < major, \
+                         exponents in [0.01, 100], and (major + minor)^(2/min(e, n)) below 1e200"
+                    )
+                })
+            }
+            Primitive::Superhyperboloid { e, n, sheets, height } => {
+                let ok = exponents_ok([e, n], 0.01, 100.0)
+                    && (sheets == 1 && height > 0.0 || sheets == 2 && height > 1.0)
+                    && height.is_finite();
+                (!ok || !powers_fit(self, [e, n])).then(|| {
+                    format!(
+                        "superhyperboloid exponents {e}, {n}, {sheets} sheets, height {height}: need exponents in \
+                         [0.01, 100], 1 or 2 sheets, height > 0 (> 1 for two sheets) and the bounds' coordinates \
+                         to the power 2/min(e, n) below 1e200"
+                    )
+                })
+            }
+            Primitive::Ratioquadric { p, q, r } if !exponents_ok([p, q, r], 1e-3, 1e3) => {
+                Some(format!("ratioquadric exponents {p}, {q}, {r}: each must lie in [0.001, 1000]"))
+            }
             Primitive::Blob(ref b) => b.check(),
             _ => None,
         }
     }
+}
+
+/// Whether every exponent lies in `[lo, hi]` (NaN does not).
+fn exponents_ok<const N: usize>(x: [f32; N], lo: f32, hi: f32) -> bool {
+    x.iter().all(|x| (lo..=hi).contains(x))
+}
+
+/// Whether the largest coordinate of a superquadric's bounds, raised to the largest power its
+/// field takes (`2 / min(exponents)`), stays far from overflow, so no bound of the field is
+/// `∞ − ∞`.
+fn powers_fit(p: &Primitive, exponents: [f32; 2]) -> bool {
+    let Some((_, hi)) = Super::of(p).map(|s| s.bounds()) else { return false };
+    let power = 2.0 / exponents[0].min(exponents[1]) as f64;
+    let top = hi.max_element().max(1.0).powf(power);
+    hi.is_finite() && top < 1e200
 }
 
 /// The chord of a line through a shape's bounds, for root isolation: the origin moved to where
@@ -570,6 +667,112 @@ mod tests {
         }
     }
 
+    /// Rays from a shell of radius 5 through points near the origin.
+    fn rays(n: usize) -> impl Iterator<Item = (DVec3, DVec3)> {
+        (0..n).map(|k| {
+            let a = k as f64 * 0.37;
+            let o = DVec3::new(a.cos() * 3.0, a.sin() * 2.0, (a * 0.7).sin() * 2.5);
+            let target = DVec3::new((a * 1.3).sin() * 1.2, (a * 2.1).cos() * 0.9, (a * 0.3).cos() * 1.1);
+            (o, (target - o) * (1.0 + 0.5 * (a * 0.11).sin()))
+        })
+    }
+
+    fn same_spans(x: &Primitive, y: &[Span], o: DVec3, d: DVec3) {
+        let s = spans_of(x, o, d);
+        assert_eq!(s.len(), y.len(), "{x:?} {o} {d} {s:?} {y:?}");
+        for (a, b) in s.iter().zip(y) {
+            let ok = (a.enter.t - b.enter.t).abs() < 1e-9 && (a.exit.t - b.exit.t).abs() < 1e-9;
+            assert!(ok, "{x:?} {o} {d}: {a:?} against {b:?}");
+        }
+    }
+
+    #[test]
+    fn the_round_supertoroid_is_the_torus() {
+        let st = Primitive::Supertoroid { major: 1.0, minor: 0.3, e: 1.0, n: 1.0 };
+        let torus = Primitive::Torus { major: 1.0, minor: 0.3 };
+        for (o, d) in rays(3000) {
+            let (s, k) = torus.spans_fixed(o, d, QuarticSolver::default(), 0);
+            same_spans(&st, &s[..k], o, d);
+        }
+    }
+
+    #[test]
+    fn the_round_superhyperboloids_are_the_quadric_hyperboloids() {
+        // x² + y² − z² − 1 ≤ 0 (one sheet) and x² + y² − z² + 1 ≤ 0 (two), cut to |z| ≤ h by
+        // the slab: the quadric's closed form.
+        for (sheets, h, j) in [(1u8, 1.5f32, -1.0f32), (2, 1.7, 1.0)] {
+            let sh = Primitive::Superhyperboloid { e: 1.0, n: 1.0, sheets, height: h };
+            let h = h as f64;
+            let q = Primitive::Quadric { coeffs: [1.0, 1.0, -1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, j] };
+            for (o, d) in rays(3000) {
+                let s = q.spans_fixed(o, d, QuarticSolver::default(), 0);
+                let expected = match slab(o.z, d.z, -h, h, 2) {
+                    Some((t0, f0, t1, f1)) => clip(s, t0, f0, t1, f1, 0),
+                    None => NONE,
+                };
+                // Spans that only touch (a ray through a rim) have no width to compare.
+                let expected: Vec<Span> =
+                    expected.0[..expected.1].iter().filter(|s| s.exit.t - s.enter.t > 1e-9).copied().collect();
+                same_spans(&sh, &expected, o, d);
+            }
+        }
+    }
+
+    #[test]
+    fn ratioquadrics_cross_where_the_pseudo_power_inverts() {
+        // Along x at height y0: g_p(x²) = 1 − g_q(y0²) = v, so x² = p v / (1 − (1 − p) v).
+        let g = |u: f64, p: f64| u / (p + (1.0 - p) * u);
+        for (p, q, r) in [(1.0f32, 1.0f32, 1.0f32), (0.1, 0.3, 2.0), (5.0, 0.05, 0.5), (1e-3, 1e3, 1.0)] {
+            let rq = Primitive::Ratioquadric { p, q, r };
+            assert!(rq.check().is_none());
+            let (p, q) = (p as f64, q as f64);
+            for k in 0..50 {
+                let y0 = -0.98 + 1.96 * k as f64 / 49.0;
+                let v = 1.0 - g(y0 * y0, q);
+                let x = (p * v / (1.0 - (1.0 - p) * v)).sqrt();
+                let (o, d) = (DVec3::new(-3.0, y0, 0.0), DVec3::new(0.5, 0.0, 0.0));
+                let expected = [Span::new((3.0 - x) / 0.5, 0, (3.0 + x) / 0.5, 0, 0)];
+                same_spans(&rq, if x > 0.0 { &expected } else { &[] }, o, d);
+            }
+        }
+        // p = q = r = 1 is the sphere.
+        let unit = Primitive::Ratioquadric { p: 1.0, q: 1.0, r: 1.0 };
+        for (o, d) in rays(2000) {
+            let (s, k) = Primitive::Sphere.spans_fixed(o, d, QuarticSolver::default(), 0);
+            same_spans(&unit, &s[..k], o, d);
+        }
+    }
+
+    #[test]
+    fn superquadric_normals_match_central_differences() {
+        // The seeds' normal by differences, against the analytic gradient (automatic
+        // differentiation), at surface points of each family.
+        let shapes = [
+            Primitive::Supertoroid { major: 1.0, minor: 0.4, e: 0.3, n: 0.5 },
+            Primitive::Supertoroid { major: 1.0, minor: 0.4, e: 2.0, n: 2.5 },
+            Primitive::Superhyperboloid { e: 0.5, n: 1.5, sheets: 1, height: 1.0 },
+            Primitive::Superhyperboloid { e: 1.5, n: 0.7, sheets: 2, height: 2.0 },
+            Primitive::Ratioquadric { p: 0.1, q: 0.3, r: 1.0 },
+            Primitive::Ratioquadric { p: 6.0, q: 6.0, r: 3.0 },
+        ];
+        for shape in shapes {
+            let (mut worst, mut n) = (0.0f64, 0);
+            for (o, d) in rays(1000) {
+                let Some(s) = spans_of(&shape, o, d).first().copied() else { continue };
+                let p = o + s.enter.t * d;
+                let g = shape.normal(p, 0).normalize();
+                let c = crate::shapes::superquadric::central_difference(|q| shape.field(q), p).normalize();
+                // (A point within the difference step of a cap's rim, where the gradient jumps,
+                // would differ; rays hit one with a chance of about 1e-6.)
+                if g.is_finite() && c.is_finite() {
+                    worst = worst.max(g.angle_between(c));
+                    n += 1;
+                }
+            }
+            assert!(n > 200 && worst < 1e-3, "{shape:?}: {n} points, worst angle {worst}");
+        }
+    }
+
     #[test]
     fn a_lone_blob_ball_has_the_potentials_radius() {
         // s·f(q) = T on the surface: solve f(q) = T/s for q by bisection (f falls on [0, 1]),
@@ -615,7 +818,7 @@ mod tests {
                 let Some(s) = spans_of(&se, o, d).first().copied() else { continue };
                 let p = o + s.enter.t * d;
                 let g = se.normal(p, 0).normalize();
-                let c = superquadric::central_difference(|q| se.field(q), p).normalize();
+                let c = crate::shapes::superquadric::central_difference(|q| se.field(q), p).normalize();
                 if g.is_finite() && c.is_finite() {
                     worst = worst.max(g.angle_between(c));
                 }
