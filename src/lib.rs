@@ -59,7 +59,9 @@ pub use ray::{
 pub use render::Light;
 pub use scene::{Coherence, Query, STREAM_CHUNK, Scene};
 pub use scene_file::SceneFile;
-pub use shapes::{Blob, BlobComponent, CsgOp, Potential, Primitive, QuarticSolver, Solid, SphereSet, SphereTest};
+pub use shapes::{
+    Blob, BlobComponent, CsgOp, Implicit, Potential, Primitive, QuarticSolver, Solid, SphereSet, SphereTest,
+};
 
 /// The README's code examples run as doctests.
 #[cfg(doctest)]

@@ -41,7 +41,9 @@ const MAX_DEPTH: usize = MEDIAN_DEPTH + 33;
 impl Scene {
     /// The built scene as bytes ([`from_bytes`](Self::from_bytes) reads them back without a
     /// rebuild). The layout is strahl's own and versioned; it is meant for the same version of
-    /// strahl, on machines of the same byte order.
+    /// strahl, on machines of the same byte order. A solid with a user's
+    /// [`Implicit`](crate::Implicit) surface is written as a marker only (a closure has no
+    /// bytes): reading such bytes is an [`Error::Serialized`](crate::Error::Serialized).
     pub fn to_bytes(&self) -> Vec<u8> {
         let bvh = self.bvh();
         // Sized from the arrays themselves, never from the statistics (which a loaded scene took
@@ -327,6 +329,8 @@ fn primitive_code(p: &Primitive) -> (u8, [f32; 10]) {
             a[3] = sheets as f32;
             12
         }
+        // A closure cannot be written: a marker, which reading refuses with a typed error.
+        Primitive::Implicit(_) => 13,
         Primitive::Blob(ref b) => {
             a[0] = b.threshold();
             if let Potential::Rational { d } = b.potential() {
@@ -415,6 +419,13 @@ fn read_solid(r: &mut Reader, depth: usize) -> Result<Solid> {
                     }
                     let potential = potential.unwrap_or(Potential::Pov);
                     Primitive::Blob(std::sync::Arc::new(Blob::new(a[0], potential, components)))
+                }
+                13 => {
+                    return Err(bad(
+                        "the scene held a user's implicit surface (a Rust closure), which bytes cannot carry: \
+                         build it in code"
+                            .to_string(),
+                    ));
                 }
                 k => return Err(bad(format!("unknown primitive kind {k}"))),
             }))

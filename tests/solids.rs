@@ -4,10 +4,11 @@
 
 use std::sync::Arc;
 
+use glam::DVec3;
 use glam::{Affine3A, Quat, Vec3};
 use strahl::{
-    Blob, BlobComponent, BuildConfig, CsgOp, Error, HitStream, Potential, Primitive, QuarticSolver, Query, Ray,
-    RayPacket, RayStream, Scene, Solid, SpatialQuery,
+    Blob, BlobComponent, BuildConfig, CsgOp, Error, HitStream, Implicit, Potential, Primitive, QuarticSolver, Query,
+    Ray, RayPacket, RayStream, Scene, Solid, SpatialQuery,
 };
 
 /// A small deterministic generator (xorshift), uniform in [0, 1).
@@ -119,6 +120,43 @@ fn gallery() -> Vec<Solid> {
     ]
 }
 
+/// User implicit surfaces (sphere tracing): a gyroid shell cut to a ball (not a distance: its
+/// Lipschitz bound is 5·2√3 < 18), and a box minus a rounded box given by its signed distance
+/// (bound 1) with its analytic gradient.
+fn implicit_gallery() -> Vec<Solid> {
+    let gyroid = Implicit::new(
+        |p: DVec3| {
+            let q = p * 5.0;
+            let g = q.x.sin() * q.y.cos() + q.y.sin() * q.z.cos() + q.z.sin() * q.x.cos();
+            (g.abs() - 0.4).max((p.length() - 1.0) * 18.0)
+        },
+        18.0,
+        Vec3::splat(-1.05),
+        Vec3::splat(1.05),
+    );
+    let rounded = |p: DVec3| (p.abs() - DVec3::splat(0.5)).max(DVec3::ZERO).length() - 0.35;
+    let rounded = Implicit::new(rounded, 1.0, Vec3::splat(-0.9), Vec3::splat(0.9)).with_gradient(move |p| {
+        let q = (p.abs() - DVec3::splat(0.5)).max(DVec3::ZERO);
+        q * p.signum()
+    });
+    let hollow = Solid::difference(vec![
+        Solid::new(Primitive::Box).transformed(Affine3A::from_scale(Vec3::new(1.0, 0.6, 1.0))),
+        Solid::new(Primitive::Implicit(Arc::new(rounded))),
+    ]);
+    vec![
+        placed(Primitive::Implicit(Arc::new(gyroid)), Vec3::ONE, 0.4, Vec3::new(0.0, 0.0, -3.0)),
+        hollow
+            .transformed(Affine3A::from_rotation_translation(Quat::from_rotation_x(0.7), Vec3::new(-3.0, -3.0, -3.0))),
+    ]
+}
+
+/// The gallery and the user implicit surfaces.
+fn gallery_all() -> Vec<Solid> {
+    let mut all = gallery();
+    all.extend(implicit_gallery());
+    all
+}
+
 /// Three balls in a row and one carving ball.
 fn blob(potential: Potential) -> Primitive {
     let c =
@@ -148,7 +186,7 @@ fn rays(n: usize, seed: u64) -> Vec<Ray> {
 
 #[test]
 fn every_hit_is_a_change_of_membership() {
-    let solids = gallery();
+    let solids = gallery_all();
     let scene = scene_of(solids.clone(), QuarticSolver::Bracketed);
     let mut checked = 0;
     let mut per_solid = vec![0usize; solids.len()];
@@ -181,7 +219,7 @@ fn every_hit_is_a_change_of_membership() {
 
 #[test]
 fn membership_by_crossing_parity_matches_point_membership() {
-    let solids = gallery();
+    let solids = gallery_all();
     let scene = scene_of(solids.clone(), QuarticSolver::Bracketed);
     let mut rng = Rng(99);
     let (mut inside, mut mismatches) = (0, 0);
@@ -206,7 +244,7 @@ fn membership_by_crossing_parity_matches_point_membership() {
 
 #[test]
 fn queries_agree_across_forms() {
-    let scene = scene_of(gallery(), QuarticSolver::Bracketed);
+    let scene = scene_of(gallery_all(), QuarticSolver::Bracketed);
     let rays = rays(4096, 3);
     let single: Vec<_> = rays.iter().map(|r| scene.intersect(r)).collect();
     let hits = single.iter().filter(|h| h.is_some()).count();
@@ -322,6 +360,13 @@ fn bad_solids_are_typed_errors() {
     bad(Solid::new(Primitive::Superhyperboloid { e: f32::NAN, n: 1.0, sheets: 1, height: 1.0 }));
     bad(Solid::new(Primitive::Ratioquadric { p: 0.0, q: 1.0, r: 1.0 }));
     bad(Solid::new(Primitive::Ratioquadric { p: 1.0, q: 1e4, r: 1.0 }));
+    let user = |l: f64, lo: Vec3, hi: Vec3| {
+        Solid::new(Primitive::Implicit(Arc::new(Implicit::new(|p: DVec3| p.length() - 1.0, l, lo, hi))))
+    };
+    assert!(bad(user(f64::NAN, -Vec3::ONE, Vec3::ONE)).contains("Lipschitz"));
+    bad(user(-1.0, -Vec3::ONE, Vec3::ONE));
+    bad(user(1.0, Vec3::ONE, -Vec3::ONE));
+    bad(user(1.0, -Vec3::ONE, Vec3::new(1.0, f32::INFINITY, 1.0)));
     let ball = |radius: f32, strength: f32| BlobComponent { center: Vec3::ZERO, radius, strength };
     let blob = |t: f32, p: Potential, c: Vec<BlobComponent>| Solid::new(Primitive::Blob(Arc::new(Blob::new(t, p, c))));
     bad(blob(0.5, Potential::Pov, vec![]));
@@ -360,7 +405,7 @@ fn bad_solids_are_typed_errors() {
 #[test]
 fn instanced_solids_match_their_flattened_twin() {
     use strahl::{Instance, InstancedScene};
-    let object = Scene::build_with_solids(Vec::new(), Vec::new(), gallery(), &BuildConfig::default()).unwrap();
+    let object = Scene::build_with_solids(Vec::new(), Vec::new(), gallery_all(), &BuildConfig::default()).unwrap();
     let instances = vec![
         Instance::new(0, Affine3A::IDENTITY),
         // Non-uniform scale, turn and a mirror: solids take any invertible affine map.
@@ -422,6 +467,10 @@ fn solids_survive_serialization() {
     for cut in (bytes.len() - 400..bytes.len()).step_by(7) {
         assert!(Scene::from_bytes(&bytes[..cut]).is_err());
     }
+    // A user's implicit surface (a closure) has no bytes: reading its marker is an error.
+    let user = Scene::build_with_solids(Vec::new(), Vec::new(), implicit_gallery(), &cfg).unwrap();
+    let err = Scene::from_bytes(&user.to_bytes()).unwrap_err();
+    assert!(matches!(&err, Error::Serialized(m) if m.contains("closure")), "{err}");
     // A solid nested too deep is refused when built, and when read back.
     let mut deep = Solid::new(Primitive::Box);
     for _ in 0..300 {

@@ -87,6 +87,16 @@ fn solid_sdl(solid: &strahl::Solid, textures: &mut std::slice::Iter<'_, String>,
             let body = match *p {
                 Primitive::Superellipsoid { e, n } => format!("superellipsoid {{ <{e}, {n}>"),
                 Primitive::Blob(ref b) => blob_sdl(b),
+                // A Rust closure has no SDL (and scene files cannot hold one): an empty
+                // isosurface over its box, so the rest of the scene still renders.
+                Primitive::Implicit(ref im) => {
+                    let (lo, hi) = im.bounds();
+                    format!(
+                        "// strahl: a user's implicit surface (no SDL)\nisosurface {{ function {{ 1 }} contained_by {{ box {{ {}, {} }} }}",
+                        v(lo),
+                        v(hi)
+                    )
+                }
                 Primitive::Supertoroid { .. } | Primitive::Superhyperboloid { .. } | Primitive::Ratioquadric { .. } => {
                     superquadric_sdl(p)
                 }

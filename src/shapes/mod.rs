@@ -13,6 +13,7 @@
 
 mod blob;
 mod csg;
+mod implicit;
 mod interval;
 mod primitive;
 pub(crate) mod solid_tree;
@@ -27,6 +28,7 @@ use crate::error::{Error, Result};
 use crate::geometry::MAX_COORDINATE;
 pub use blob::{Blob, BlobComponent, MAX_BLOB_COMPONENTS, Potential};
 pub use csg::{CSG_TOLERANCE, CsgOp, MAX_LEAVES, MAX_SOLID_DEPTH, PreparedSolid, Solid};
+pub use implicit::{Implicit, MAX_TRACE_STEPS};
 pub use primitive::Primitive;
 pub use solve::{QuarticSolver, quadratic, quartic};
 pub use sphere::SphereTest;
