@@ -60,7 +60,7 @@ pub use render::Light;
 pub use scene::{Coherence, Query, STREAM_CHUNK, Scene};
 pub use scene_file::SceneFile;
 pub use shapes::{
-    Blob, BlobComponent, CsgOp, Implicit, Potential, Primitive, QuarticSolver, Solid, SphereSet, SphereTest,
+    Blob, BlobComponent, CsgOp, Implicit, MeshSolid, Potential, Primitive, QuarticSolver, Solid, SphereSet, SphereTest,
 };
 
 /// The README's code examples run as doctests.

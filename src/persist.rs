@@ -22,7 +22,8 @@ use crate::geometry::triangle::{BLOCK, TriBlock};
 use crate::instance::{Instance, InstancedScene};
 use crate::scene::Scene;
 use crate::shapes::{
-    Blob, BlobComponent, CsgOp, MAX_SOLID_DEPTH, Potential, Primitive, QuarticSolver, Solid, SphereSet, SphereTest,
+    Blob, BlobComponent, CsgOp, MAX_SOLID_DEPTH, MeshSolid, Potential, Primitive, QuarticSolver, Solid, SphereSet,
+    SphereTest,
 };
 
 /// The first bytes of a serialized scene.
@@ -60,12 +61,7 @@ impl Scene {
         w.u8(bvh.prefetch as u8);
         w.u64(self.meshes().len() as u64);
         for m in self.meshes() {
-            w.u64(m.name.len() as u64);
-            w.0.extend_from_slice(m.name.as_bytes());
-            w.u64(m.positions().len() as u64);
-            m.positions().iter().for_each(|p| p.to_array().iter().for_each(|&x| w.f32(x)));
-            w.u64(m.indices().len() as u64);
-            m.indices().iter().flatten().for_each(|&i| w.u32(i));
+            write_mesh(&mut w, m);
         }
         w.u32(bvh.root);
         w.u64(bvh.nodes.len() as u64);
@@ -137,13 +133,7 @@ impl Scene {
         let mesh_count = r.count(24)?;
         let mut meshes = Vec::with_capacity(mesh_count);
         for _ in 0..mesh_count {
-            let len = r.count(1)?;
-            let name = String::from_utf8(r.take(len)?.to_vec()).map_err(|_| bad("a mesh name is not UTF-8"))?;
-            let n = r.count(12)?;
-            let positions = (0..n).map(|_| Ok(Vec3::new(r.f32()?, r.f32()?, r.f32()?))).collect::<Result<Vec<_>>>()?;
-            let m = r.count(12)?;
-            let indices = (0..m).map(|_| Ok([r.u32()?, r.u32()?, r.u32()?])).collect::<Result<Vec<_>>>()?;
-            meshes.push(TriangleMesh::new(name, positions, indices)?);
+            meshes.push(read_mesh(&mut r)?);
         }
         let root = r.u32()?;
         let node_count = r.count(4 * (6 * WIDTH + WIDTH))?;
@@ -254,6 +244,27 @@ impl Scene {
     }
 }
 
+/// Writes a mesh: name, positions, triangles.
+fn write_mesh(w: &mut Writer, m: &TriangleMesh) {
+    w.u64(m.name.len() as u64);
+    w.0.extend_from_slice(m.name.as_bytes());
+    w.u64(m.positions().len() as u64);
+    m.positions().iter().for_each(|p| p.to_array().iter().for_each(|&x| w.f32(x)));
+    w.u64(m.indices().len() as u64);
+    m.indices().iter().flatten().for_each(|&i| w.u32(i));
+}
+
+/// Reads what [`write_mesh`] wrote, checked by [`TriangleMesh::new`].
+fn read_mesh(r: &mut Reader) -> Result<TriangleMesh> {
+    let len = r.count(1)?;
+    let name = String::from_utf8(r.take(len)?.to_vec()).map_err(|_| bad("a mesh name is not UTF-8"))?;
+    let n = r.count(12)?;
+    let positions = (0..n).map(|_| Ok(Vec3::new(r.f32()?, r.f32()?, r.f32()?))).collect::<Result<Vec<_>>>()?;
+    let m = r.count(12)?;
+    let indices = (0..m).map(|_| Ok([r.u32()?, r.u32()?, r.u32()?])).collect::<Result<Vec<_>>>()?;
+    TriangleMesh::new(name, positions, indices)
+}
+
 /// Writes a solid tree: a tag (0 primitive, 1 transformed, 2 CSG), then the primitive's kind
 /// and ten parameters, the 3×4 matrix (columns) and the child, or the operation and operands.
 fn write_solid(w: &mut Writer, s: &Solid) {
@@ -270,6 +281,10 @@ fn write_solid(w: &mut Writer, s: &Solid) {
                 for c in b.components() {
                     c.center.to_array().iter().chain(&[c.radius, c.strength]).for_each(|&x| w.f32(x));
                 }
+            }
+            if let Primitive::Mesh(m) = p {
+                // The mesh as the scene's meshes are written: name, positions, triangles.
+                write_mesh(w, m.mesh());
             }
         }
         Solid::Transformed(m, inner) => {
@@ -331,6 +346,8 @@ fn primitive_code(p: &Primitive) -> (u8, [f32; 10]) {
         }
         // A closure cannot be written: a marker, which reading refuses with a typed error.
         Primitive::Implicit(_) => 13,
+        // The mesh follows the parameters (see `write_solid`).
+        Primitive::Mesh(_) => 14,
         Primitive::Blob(ref b) => {
             a[0] = b.threshold();
             if let Potential::Rational { d } = b.potential() {
@@ -419,6 +436,10 @@ fn read_solid(r: &mut Reader, depth: usize) -> Result<Solid> {
                     }
                     let potential = potential.unwrap_or(Potential::Pov);
                     Primitive::Blob(std::sync::Arc::new(Blob::new(a[0], potential, components)))
+                }
+                14 => {
+                    let mesh = read_mesh(r)?;
+                    Primitive::Mesh(std::sync::Arc::new(MeshSolid::new(mesh)?))
                 }
                 13 => {
                     return Err(bad(

@@ -7,8 +7,8 @@ use std::sync::Arc;
 use glam::DVec3;
 use glam::{Affine3A, Quat, Vec3};
 use strahl::{
-    Blob, BlobComponent, BuildConfig, CsgOp, Error, HitStream, Implicit, Potential, Primitive, QuarticSolver, Query,
-    Ray, RayPacket, RayStream, Scene, Solid, SpatialQuery,
+    Blob, BlobComponent, BuildConfig, CsgOp, Error, HitStream, Implicit, MeshSolid, Potential, Primitive,
+    QuarticSolver, Query, Ray, RayPacket, RayStream, Scene, Solid, SpatialQuery, TriangleMesh,
 };
 
 /// A small deterministic generator (xorshift), uniform in [0, 1).
@@ -117,7 +117,37 @@ fn gallery() -> Vec<Solid> {
         // Ratioquadrics: a pinched star (rounded tips) and a rounded box.
         placed(Primitive::Ratioquadric { p: 0.05, q: 0.2, r: 0.1 }, Vec3::ONE, 0.9, Vec3::new(-3.0, 3.0, -3.0)),
         placed(Primitive::Ratioquadric { p: 8.0, q: 8.0, r: 3.0 }, Vec3::ONE, 1.9, Vec3::new(3.0, 3.0, -3.0)),
+        // Closed triangle meshes in CSG: a tessellated ball minus an inside-out (clockwise)
+        // mesh cube, cut by an analytic cylinder.
+        mesh_csg()
+            .transformed(Affine3A::from_rotation_translation(Quat::from_rotation_z(0.3), Vec3::new(3.0, -3.0, -3.0))),
     ]
+}
+
+/// A closed mesh as a solid.
+fn mesh_solid(m: TriangleMesh) -> Solid {
+    Solid::new(Primitive::Mesh(Arc::new(MeshSolid::new(m).unwrap())))
+}
+
+/// A mesh cube with its triangles wound the other way (normals inwards).
+fn inside_out_cube(lo: Vec3, hi: Vec3) -> TriangleMesh {
+    let c = strahl::procedural::cuboid(lo, hi);
+    let flipped = c.indices().iter().map(|&[a, b, c]| [a, c, b]).collect();
+    TriangleMesh::new("inside-out cube", c.positions().to_vec(), flipped).unwrap()
+}
+
+fn mesh_csg() -> Solid {
+    Solid::intersection(vec![
+        Solid::difference(vec![
+            mesh_solid(strahl::procedural::uv_sphere(Vec3::ZERO, 1.0, 16, 24)),
+            mesh_solid(inside_out_cube(Vec3::splat(-0.45), Vec3::splat(1.2))),
+        ]),
+        Solid::new(Primitive::Cylinder).transformed(Affine3A::from_scale_rotation_translation(
+            Vec3::new(0.8, 0.8, 2.0),
+            Quat::IDENTITY,
+            Vec3::new(0.0, 0.0, -1.0),
+        )),
+    ])
 }
 
 /// User implicit surfaces (sphere tracing): a gyroid shell cut to a ball (not a distance: its
@@ -512,4 +542,51 @@ fn rays_from_inside_always_find_the_way_out() {
     }
     assert!(tried > 10_000);
     assert_eq!(lost, 0, "{lost} of {tried} rays from inside hit nothing");
+}
+
+#[test]
+fn a_mesh_cube_crosses_where_the_box_does() {
+    // The watertight test's crossings of a closed mesh cube (either winding) against the slab
+    // test, to float32 precision; rays through its edges and corners included.
+    for mesh in [strahl::procedural::cuboid(-Vec3::ONE, Vec3::ONE), inside_out_cube(-Vec3::ONE, Vec3::ONE)] {
+        let cube = scene_of(vec![mesh_solid(mesh)], QuarticSolver::default());
+        let exact = scene_of(vec![Solid::new(Primitive::Box)], QuarticSolver::default());
+        let mut rng = Rng(5);
+        let mut rays: Vec<Ray> = (0..5000)
+            .map(|_| {
+                let o = rng.vec(1.0).normalize() * 4.0;
+                Ray::new(o, rng.vec(1.1) - o)
+            })
+            .collect();
+        // Through edges and corners exactly.
+        rays.extend([Vec3::new(1.0, 1.0, 0.3), Vec3::ONE, Vec3::new(-1.0, 0.2, 1.0)].map(|p| Ray::new(p * 3.0, -p)));
+        for r in &rays {
+            let (mut a, mut b) = (Vec::new(), Vec::new());
+            cube.for_each_hit(r, |h| a.push(*h));
+            exact.for_each_hit(r, |h| b.push(*h));
+            a.sort_by(|x, y| x.t.total_cmp(&y.t));
+            b.sort_by(|x, y| x.t.total_cmp(&y.t));
+            assert_eq!(a.len(), b.len(), "{r:?} {a:?} {b:?}");
+            for (x, y) in a.iter().zip(&b) {
+                assert!((x.t - y.t).abs() <= 1e-5 * y.t.abs().max(1.0), "{r:?} {x:?} {y:?}");
+                // Outward normals, whichever way the mesh winds.
+                assert!(x.ng.normalize().dot(y.ng.normalize()) > 0.999, "{r:?} {x:?} {y:?}");
+            }
+        }
+    }
+}
+
+#[test]
+fn meshes_that_bound_no_solid_are_refused() {
+    let quad = strahl::procedural::quad(1.0, 1.0);
+    let err = MeshSolid::new(quad).unwrap_err();
+    assert!(matches!(&err, Error::BadSolid { message, .. } if message.contains("not closed")), "{err}");
+    // One triangle of a cube turned the other way: its edges run twice one way.
+    let c = strahl::procedural::cuboid(-Vec3::ONE, Vec3::ONE);
+    let mut idx = c.indices().to_vec();
+    idx[0] = [idx[0][0], idx[0][2], idx[0][1]];
+    assert!(MeshSolid::new(TriangleMesh::new("twisted", c.positions().to_vec(), idx).unwrap()).is_err());
+    assert!(MeshSolid::new(TriangleMesh::new("empty", Vec::new(), Vec::new()).unwrap()).is_err());
+    let nan = TriangleMesh::new("nan", vec![Vec3::NAN; 3], vec![[0, 1, 2]]).unwrap();
+    assert!(MeshSolid::new(nan).is_err());
 }

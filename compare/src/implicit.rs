@@ -119,10 +119,7 @@ fn lipschitz(prim: &Primitive) -> Option<f64> {
     match prim {
         Primitive::Superellipsoid { e, n } if *e <= 1.0 && *n <= 1.0 => Some(1.0),
         Primitive::Blob(b) if b.potential() == strahl::Potential::Pov => Some(
-            b.components()
-                .iter()
-                .map(|c| c.strength.abs() as f64 * 8.0 / (3.0 * 3f64.sqrt() * c.radius as f64))
-                .sum(),
+            b.components().iter().map(|c| c.strength.abs() as f64 * 8.0 / (3.0 * 3f64.sqrt() * c.radius as f64)).sum(),
         ),
         _ => None,
     }

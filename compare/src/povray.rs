@@ -87,6 +87,23 @@ fn solid_sdl(solid: &strahl::Solid, textures: &mut std::slice::Iter<'_, String>,
             let body = match *p {
                 Primitive::Superellipsoid { e, n } => format!("superellipsoid {{ <{e}, {n}>"),
                 Primitive::Blob(ref b) => blob_sdl(b),
+                // POV-Ray's mesh2 is a solid in CSG once it has an inside vector (its own
+                // parity test along that direction).
+                Primitive::Mesh(ref m) => {
+                    let mesh = m.mesh();
+                    let mut s = format!("mesh2 {{ vertex_vectors {{ {}", mesh.positions().len());
+                    for p in mesh.positions() {
+                        write!(s, ", {}", v(*p)).unwrap();
+                    }
+                    let tris: Vec<usize> = (0..mesh.triangle_count()).filter(|&i| mesh.is_hittable(i)).collect();
+                    write!(s, " }} face_indices {{ {}", tris.len()).unwrap();
+                    for &i in &tris {
+                        let [a, b, c] = mesh.indices()[i];
+                        write!(s, ", <{a}, {b}, {c}>").unwrap();
+                    }
+                    s.push_str(" } inside_vector <0.31, 0.73, 0.61>");
+                    s
+                }
                 // A Rust closure has no SDL (and scene files cannot hold one): an empty
                 // isosurface over its box, so the rest of the scene still renders.
                 Primitive::Implicit(ref im) => {

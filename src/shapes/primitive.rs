@@ -11,6 +11,7 @@ use glam::DVec3;
 use super::blob::{self, Blob};
 use super::implicit::Implicit;
 use super::interval::{self, Isolation};
+use super::mesh_solid::MeshSolid;
 use super::solve::{self, QuarticSolver};
 use super::superquadric::Super;
 
@@ -115,6 +116,8 @@ pub enum Primitive {
     /// tracing: see [`Implicit`]. Scene files cannot hold one, and [`Scene::to_bytes`]
     /// (crate::Scene::to_bytes) writes only a marker that reading refuses.
     Implicit(Arc<Implicit>),
+    /// A closed triangle mesh as a solid (inside by crossing parity): see [`MeshSolid`].
+    Mesh(Arc<MeshSolid>),
 }
 
 /// One end of a span: where the line crosses a leaf's surface, which leaf (its index in the
@@ -234,6 +237,15 @@ impl Primitive {
                     ch.push_spans(&roots, im.field(ch.p) <= 0.0, leaf, out);
                 });
             }
+            Primitive::Mesh(m) => {
+                let Some(ch) = Chord::new(o, d, m.bounds()) else { return };
+                TRACE.with(|roots| {
+                    let mut roots = roots.borrow_mut();
+                    m.crossings(ch.p, ch.u, ch.length, &mut roots);
+                    // The chord starts outside the bounds, so outside the mesh.
+                    ch.push_spans(&roots, false, leaf, out);
+                });
+            }
             Primitive::Blob(b) => blob::ACTIVE.with(|active| {
                 let Some(ch) = Chord::new(o, d, b.bounds()) else { return };
                 let mut active = active.borrow_mut();
@@ -332,7 +344,8 @@ impl Primitive {
             | Primitive::Superhyperboloid { .. }
             | Primitive::Ratioquadric { .. }
             | Primitive::Blob(_)
-            | Primitive::Implicit(_) => NONE,
+            | Primitive::Implicit(_)
+            | Primitive::Mesh(_) => NONE,
         }
     }
 
@@ -381,6 +394,7 @@ impl Primitive {
                 let outside = p.cmplt(lo).any() || p.cmpgt(hi).any();
                 if outside { f64::INFINITY } else { im.field(p) }
             }
+            Primitive::Mesh(ref m) => m.field(p),
         }
     }
 
@@ -428,6 +442,7 @@ impl Primitive {
             | Primitive::Ratioquadric { .. } => Super::of(self).map_or(DVec3::Z, |s| s.gradient(p)),
             Primitive::Blob(ref b) => b.gradient(p),
             Primitive::Implicit(ref im) => im.gradient(p),
+            Primitive::Mesh(ref m) => m.normal(p),
         }
     }
 
@@ -441,6 +456,7 @@ impl Primitive {
             | Primitive::Ratioquadric { .. } => Super::of(self).map(|s| s.bounds()),
             Primitive::Blob(ref b) => Some(b.bounds()),
             Primitive::Implicit(ref im) => Some(im.bounds_f64()),
+            Primitive::Mesh(ref m) => Some(m.bounds()),
             Primitive::Cylinder | Primitive::Cone { .. } => {
                 let (r0, r1) = self.cone_radii().unwrap_or((1.0, 1.0));
                 let r = r0.max(r1);
