@@ -590,3 +590,36 @@ fn meshes_that_bound_no_solid_are_refused() {
     let nan = TriangleMesh::new("nan", vec![Vec3::NAN; 3], vec![[0, 1, 2]]).unwrap();
     assert!(MeshSolid::new(nan).is_err());
 }
+
+#[test]
+fn scene_files_cut_closed_obj_meshes() {
+    // A closed OBJ cube (8 vertices, 12 triangles) minus an analytic sphere, from a scene file;
+    // an open OBJ (one quad) is refused naming the node.
+    let dir = std::env::temp_dir().join(format!("strahl-mesh-csg-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let cube = strahl::procedural::cuboid(-Vec3::ONE, Vec3::ONE);
+    let mut obj = String::new();
+    for p in cube.positions() {
+        obj += &format!("v {} {} {}\n", p.x, p.y, p.z);
+    }
+    for t in cube.indices() {
+        obj += &format!("f {} {} {}\n", t[0] + 1, t[1] + 1, t[2] + 1);
+    }
+    std::fs::write(dir.join("cube.obj"), obj).unwrap();
+    std::fs::write(dir.join("quad.obj"), "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n").unwrap();
+    let text = "[mesh.m]\nsolid = { difference = [ { obj = \"cube.obj\" }, { sphere = { center = [1.0, 1.0, 1.0], radius = 1.0 } } ] }\n\
+                [[instance]]\nmesh = \"m\"\n";
+    let file = strahl::SceneFile::parse(text, &dir.join("x.toml")).unwrap();
+    let scene = file.build(&BuildConfig::default()).unwrap();
+    // Straight down the cube's corner (1, 1, ·) the sphere's hollow comes first.
+    let down = Ray::new(Vec3::new(0.9, 0.9, 5.0), -Vec3::Z);
+    let h = scene.intersect(&down).unwrap();
+    let sphere_z = 1.0 - (1.0f32 - 0.02).sqrt();
+    assert!((h.t - (5.0 - sphere_z)).abs() < 1e-4, "{h:?}");
+    let straight = scene.intersect(&Ray::new(Vec3::new(-0.5, -0.5, 5.0), -Vec3::Z)).unwrap();
+    assert!((straight.t - 4.0).abs() < 1e-5 && straight.ng.z > 0.0, "{straight:?}");
+    let open = text.replace("cube.obj", "quad.obj");
+    let err = strahl::SceneFile::parse(&open, &dir.join("x.toml")).unwrap_err().to_string();
+    assert!(err.contains("solid.difference[0]") && err.contains("not closed"), "{err}");
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -3,13 +3,15 @@
 //! material. Primitives take POV-Ray's parameters (a cylinder from `base` to `cap`, a plane by
 //! its `normal` and `offset`), turned here into a canonical [`Primitive`] and its placement.
 
+use std::path::Path;
 use std::sync::Arc;
 
 use glam::{Affine3A, Mat3, Vec3};
 use serde::Deserialize;
 
 use super::{Scale, placement};
-use crate::shapes::{Blob, BlobComponent, CsgOp, MAX_SOLID_DEPTH, Potential, Primitive, Solid};
+use crate::geometry::TriangleMesh;
+use crate::shapes::{Blob, BlobComponent, CsgOp, MAX_SOLID_DEPTH, MeshSolid, Potential, Primitive, Solid};
 
 /// One node of a solid tree, as written.
 #[derive(Deserialize)]
@@ -29,6 +31,9 @@ pub(super) struct RawSolid {
     superhyperboloid: Option<RawSuperhyperboloid>,
     ratioquadric: Option<RawRatioquadric>,
     blob: Option<RawBlob>,
+    /// A closed triangle mesh from an OBJ file (every object and group of it, as one mesh),
+    /// relative to the scene file.
+    obj: Option<String>,
     union: Option<Vec<RawSolid>>,
     intersection: Option<Vec<RawSolid>>,
     difference: Option<Vec<RawSolid>>,
@@ -195,9 +200,9 @@ pub(super) type Built = (Solid, Vec<Option<String>>);
 
 /// Turns the written tree into a [`Solid`]; `Err` names the node (by its path of operand
 /// indices) and what is wrong with it.
-pub(super) fn build(raw: &RawSolid) -> Result<Built, String> {
+pub(super) fn build(raw: &RawSolid, base: &Path) -> Result<Built, String> {
     let mut leaves = Vec::new();
-    let solid = node(raw, "solid", None, 0, &mut leaves)?;
+    let solid = node(raw, "solid", None, 0, base, &mut leaves)?;
     Ok((solid, leaves))
 }
 
@@ -206,6 +211,7 @@ fn node(
     at: &str,
     material: Option<&String>,
     depth: usize,
+    base: &Path,
     leaves: &mut Vec<Option<String>>,
 ) -> Result<Solid, String> {
     if depth > MAX_SOLID_DEPTH {
@@ -226,6 +232,7 @@ fn node(
         raw.superhyperboloid.is_some(),
         raw.ratioquadric.is_some(),
         raw.blob.is_some(),
+        raw.obj.is_some(),
         raw.union.is_some(),
         raw.intersection.is_some(),
         raw.difference.is_some(),
@@ -233,7 +240,7 @@ fn node(
     if kinds.iter().filter(|&&k| k).count() != 1 {
         return Err(format!(
             "{at}: needs exactly one of sphere, box, cylinder, cone, disc, plane, torus, quadric, superellipsoid, \
-             supertoroid, superhyperboloid, ratioquadric, blob, union, intersection, difference"
+             supertoroid, superhyperboloid, ratioquadric, blob, obj, union, intersection, difference"
         ));
     }
     let bad = |what: String| Err(format!("{at}: {what}"));
@@ -331,6 +338,21 @@ fn node(
             .collect();
         leaves.push(material.cloned());
         Solid::new(Primitive::Blob(Arc::new(Blob::new(b.threshold, potential, components))))
+    } else if let Some(file) = &raw.obj {
+        let path = base.join(file);
+        let meshes = crate::geometry::load_obj(&path).map_err(|e| format!("{at}: {e}"))?;
+        // One mesh of every object and group.
+        let (mut positions, mut indices) = (Vec::new(), Vec::new());
+        for m in &meshes {
+            let offset = positions.len() as u32;
+            positions.extend_from_slice(m.positions());
+            indices.extend(m.indices().iter().map(|t| t.map(|i| i + offset)));
+        }
+        let mesh =
+            TriangleMesh::new(path.display().to_string(), positions, indices).map_err(|e| format!("{at}: {e}"))?;
+        let solid = MeshSolid::new(mesh).map_err(|e| format!("{at}: {e}"))?;
+        leaves.push(material.cloned());
+        Solid::new(Primitive::Mesh(Arc::new(solid)))
     } else {
         let (op, operands) = match (&raw.union, &raw.intersection, &raw.difference) {
             (Some(o), _, _) => (CsgOp::Union, o),
@@ -345,7 +367,8 @@ fn node(
             .iter()
             .enumerate()
             .map(|(i, o)| {
-                node(o, &format!("{at}.{}[{i}]", format!("{op:?}").to_lowercase()), material, depth + 1, leaves)
+                let at = format!("{at}.{}[{i}]", format!("{op:?}").to_lowercase());
+                node(o, &at, material, depth + 1, base, leaves)
             })
             .collect::<Result<Vec<_>, _>>()?;
         Solid::Csg(op, children)

@@ -28,6 +28,8 @@ pub struct MeshSolid {
     scene: Scene,
     /// The mesh winds clockwise seen from outside: its geometric normals point inwards.
     inward: bool,
+    /// The bounds of the mesh (computed once: a mesh's own `bounds` walks every vertex).
+    bounds: (DVec3, DVec3),
 }
 
 impl MeshSolid {
@@ -81,7 +83,8 @@ impl MeshSolid {
                 a.dot(b.cross(c))
             })
             .sum();
-        Ok(MeshSolid { mesh, scene, inward: volume < 0.0 })
+        let (lo, hi) = mesh.bounds().unwrap_or((Vec3::ZERO, Vec3::ZERO));
+        Ok(MeshSolid { mesh, scene, inward: volume < 0.0, bounds: (lo.as_dvec3(), hi.as_dvec3()) })
     }
 
     /// The mesh.
@@ -90,8 +93,7 @@ impl MeshSolid {
     }
 
     pub(crate) fn bounds(&self) -> (DVec3, DVec3) {
-        let (lo, hi) = self.mesh.bounds().unwrap_or((Vec3::ZERO, Vec3::ZERO));
-        (lo.as_dvec3(), hi.as_dvec3())
+        self.bounds
     }
 
     /// The crossings of the line `p + s u` (`u` unit, `p` outside the bounds) for
