@@ -329,7 +329,7 @@ impl SceneFile {
             };
             let mut leaf_materials = Vec::new();
             let source = if let Some(raw) = &m.solid {
-                let (solid, names) = solid::build(raw, &base).map_err(|e| err(format!("mesh `{name}`: {e}")))?;
+                let (solid, names) = solid::build(raw, base).map_err(|e| err(format!("mesh `{name}`: {e}")))?;
                 solid.check().map_err(|e| err(format!("mesh `{name}`: the solid: {e}")))?;
                 for n in &names {
                     leaf_materials.push(material(n, &format!("mesh `{name}`, a solid's node,"))?);
