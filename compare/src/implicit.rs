@@ -234,7 +234,8 @@ fn differs(got: Option<f64>, want: Option<f64>) -> bool {
     }
 }
 
-/// Runs the comparison and writes `implicit.md`, `implicit.json` and `implicit_solvers.png`.
+/// Runs the comparison and writes `implicit.md`, `implicit.json` and the two charts of
+/// [`chart`].
 pub fn run(width: usize, passes: usize, pool: &rayon::ThreadPool, out: &Path) -> anyhow::Result<ImplicitReport> {
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let w = width.min(256) as u32;
@@ -347,36 +348,58 @@ pub fn run(width: usize, passes: usize, pool: &rayon::ThreadPool, out: &Path) ->
     };
     std::fs::write(out.join("implicit.json"), serde_json::to_string_pretty(&report)?)?;
     std::fs::write(out.join("implicit.md"), markdown(&report))?;
+    chart(out, &report)?;
+    Ok(report)
+}
+
+/// The charts from a report, one per family as the issue asks: `implicit_superquadrics.png`
+/// (the superellipsoids) and `implicit_metaballs.png` (the blob); each point one method, its
+/// figures over the family's shapes it applies to.
+pub fn chart(out: &Path, report: &ImplicitReport) -> anyhow::Result<()> {
     if !crate::report::ensure_font() {
         anyhow::bail!("no DejaVu font found for chart labels (apt-get install fonts-dejavu-core)");
     }
-    // The chart: one point per method, its figures summed over the shapes.
-    let points = methods
-        .iter()
-        .map(|m| {
-            let mine: Vec<&MethodRow> = report.rows.iter().filter(|r| r.method == m.name()).collect();
-            let wrong = mine.iter().map(|r| r.grazing_wrong).sum::<f64>() / mine.len() as f64;
-            let mrays = mine.len() as f64 / mine.iter().map(|r| 1.0 / r.mrays).sum::<f64>();
-            let only = if mine.len() < shapes().len() {
-                format!(", {} shapes with a Lipschitz bound", mine.len())
-            } else {
-                String::new()
-            };
-            let label = if wrong == 0.0 {
-                format!("{} (none wrong: drawn at 1e-5{only})", m.name())
-            } else {
-                format!("{} ({:.2}% wrong{only})", m.name(), wrong * 100.0)
-            };
-            (label, wrong.max(1e-5), mrays)
-        })
-        .collect();
-    scatter(
-        &out.join("implicit_solvers.png"),
-        "Implicit shapes: root finding, speed against accuracy",
-        "grazing rays hit or missed wrongly, mean over the shapes (log; left is better)",
-        points,
-    )?;
-    Ok(report)
+    let is_blob = |shape: &str| shapes().iter().any(|(n, p)| *n == shape && matches!(p, Primitive::Blob(_)));
+    for (file, title, blob) in [
+        ("implicit_superquadrics.png", "Superquadrics: root finding, speed against accuracy", false),
+        ("implicit_metaballs.png", "Metaballs: root finding, speed against accuracy", true),
+    ] {
+        let rows: Vec<&MethodRow> = report.rows.iter().filter(|r| is_blob(&r.shape) == blob).collect();
+        let mut names: Vec<&str> = Vec::new();
+        for r in &rows {
+            if !names.contains(&r.method.as_str()) {
+                names.push(&r.method);
+            }
+        }
+        let shapes = rows.iter().map(|r| r.shape.as_str()).collect::<std::collections::BTreeSet<_>>().len();
+        let points = names
+            .iter()
+            .map(|&name| {
+                let mine: Vec<&&MethodRow> = rows.iter().filter(|r| r.method == name).collect();
+                let wrong = mine.iter().map(|r| r.grazing_wrong).sum::<f64>() / mine.len() as f64;
+                // The harmonic mean: the rate of tracing the same rays through each shape.
+                let mrays = mine.len() as f64 / mine.iter().map(|r| 1.0 / r.mrays).sum::<f64>();
+                let only = if mine.len() < shapes {
+                    format!(", {} of {shapes} shapes: the others have no Lipschitz bound", mine.len())
+                } else {
+                    String::new()
+                };
+                let label = if wrong == 0.0 {
+                    format!("{name} (none wrong: drawn at 1e-5{only})")
+                } else {
+                    format!("{name} ({:.2}% wrong{only})", wrong * 100.0)
+                };
+                (label, wrong.max(1e-5), mrays)
+            })
+            .collect();
+        let x = if shapes > 1 {
+            format!("grazing rays hit or missed wrongly, mean over {shapes} shapes (log; left is better)")
+        } else {
+            "grazing rays hit or missed wrongly (log; left is better)".to_string()
+        };
+        scatter(&out.join(file), title, &x, points)?;
+    }
+    Ok(())
 }
 
 /// The report as Markdown.

@@ -85,12 +85,14 @@ struct Args {
     torus: bool,
     /// Implicit shapes (issue 30): strahl's interval root isolation against marching with
     /// 8–512 steps on superellipsoids and a blob, speed against accuracy (camera and grazing
-    /// rays); writes implicit.md, implicit.json and implicit_solvers.png to --out, then exits.
+    /// rays); writes implicit.md, implicit.json, implicit_superquadrics.png and
+    /// implicit_metaballs.png to --out, then exits.
     #[arg(long)]
     implicit: bool,
-    /// Internal: redraw --spheres' two charts into --out from its spheres.json, without measuring.
-    #[arg(long, hide = true)]
-    spheres_charts_from: Option<PathBuf>,
+    /// Redraw the charts of --spheres, --torus or --implicit into --out from their JSON report
+    /// (spheres.json, torus.json or implicit.json), without measuring.
+    #[arg(long, alias = "spheres-charts-from")]
+    charts_from: Option<PathBuf>,
     /// Sphereflake levels for --spheres (level 3: 820 spheres, 6: 597,871).
     #[arg(long, value_delimiter = ',', default_value = "3,5,6")]
     sphere_levels: Vec<u32>,
@@ -163,9 +165,14 @@ fn main() -> anyhow::Result<()> {
         return render_comparison(&args, &pool);
     }
     let device = embree::Device::new(&format!("threads={}", args.threads))?;
-    if let Some(json) = &args.spheres_charts_from {
-        let r: compare::spheres::SphereReport = serde_json::from_slice(&std::fs::read(json)?)?;
-        return compare::spheres::charts(&args.out, &r);
+    if let Some(json) = &args.charts_from {
+        let bytes = std::fs::read(json).with_context(|| format!("reading {}", json.display()))?;
+        return match json.file_name().and_then(|n| n.to_str()) {
+            Some("spheres.json") => compare::spheres::charts(&args.out, &serde_json::from_slice(&bytes)?),
+            Some("torus.json") => compare::torus::chart(&args.out, &serde_json::from_slice(&bytes)?),
+            Some("implicit.json") => compare::implicit::chart(&args.out, &serde_json::from_slice(&bytes)?),
+            _ => bail!("--charts-from {}: expected spheres.json, torus.json or implicit.json", json.display()),
+        };
     }
     if args.implicit {
         let r = compare::implicit::run(args.width as usize, args.passes, &pool, &args.out)?;

@@ -645,7 +645,8 @@ pub fn markdown(r: &SphereReport) -> String {
 }
 
 /// A scatter chart: one labelled point per `(label, error, Mrays/s)`, the error on a log axis
-/// (decade labels only), written to `path` (900×520 PNG).
+/// (decade labels only), the Pareto front drawn and its points ringed, written to `path`
+/// (900×520 PNG).
 pub(crate) fn scatter(path: &Path, title: &str, xdesc: &str, points: Vec<(String, f64, f64)>) -> anyhow::Result<()> {
     use plotters::prelude::*;
     let root = BitMapBackend::new(path, (900, 520)).into_drawing_area();
@@ -669,7 +670,37 @@ pub(crate) fn scatter(path: &Path, title: &str, xdesc: &str, points: Vec<(String
         })
         .label_style(("sans-serif", 14))
         .draw()?;
+    // The Pareto front: the points no other point beats on both error and speed, joined from
+    // the most accurate to the fastest as a staircase (what is reachable: at least this fast
+    // at this error or worse).
+    let mut front: Vec<(f64, f64)> = points
+        .iter()
+        .zip(&xs)
+        .filter(|(p, x)| !points.iter().zip(&xs).any(|(q, y)| *y <= **x && q.2 >= p.2 && (*y < **x || q.2 > p.2)))
+        .map(|(p, &x)| (x, p.2))
+        .collect();
+    front.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut stairs = Vec::new();
+    for (i, &(x, y)) in front.iter().enumerate() {
+        if i > 0 {
+            stairs.push((x, front[i - 1].1));
+        }
+        stairs.push((x, y));
+    }
+    let red = RGBColor(200, 40, 40);
+    chart
+        .draw_series(LineSeries::new(stairs, red.stroke_width(2)))?
+        .label("Pareto front (no method both more accurate and faster)")
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], red.stroke_width(2)));
+    chart.draw_series(front.iter().map(|&(x, y)| Circle::new((x, y), 10, red.stroke_width(2))))?;
     chart.draw_series(points.iter().zip(&xs).map(|(p, &x)| Circle::new((x, p.2), 6, BLUE.filled())))?;
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 13))
+        .draw()?;
     // Labels above their points, every second one below, so that neighbours do not overlap.
     chart.draw_series(points.iter().zip(&xs).enumerate().map(|(i, (p, &x))| {
         let dy = if i % 2 == 0 { 0.03 } else { -0.07 };

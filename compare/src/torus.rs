@@ -223,6 +223,12 @@ pub fn run(width: usize, passes: usize, pool: &rayon::ThreadPool, out: &Path) ->
     };
     std::fs::write(out.join("torus.json"), serde_json::to_string_pretty(&report)?)?;
     std::fs::write(out.join("torus.md"), markdown(&report))?;
+    chart(out, &report)?;
+    Ok(report)
+}
+
+/// `torus_solvers.png` from a report.
+pub fn chart(out: &Path, report: &TorusReport) -> anyhow::Result<()> {
     if !crate::report::ensure_font() {
         anyhow::bail!("no DejaVu font found for chart labels (apt-get install fonts-dejavu-core)");
     }
@@ -238,8 +244,7 @@ pub fn run(width: usize, passes: usize, pool: &rayon::ThreadPool, out: &Path) ->
                 (format!("{} ({wrong:.2}% wrong far + silhouette)", r.solver), r.far_t_error[1], r.mrays)
             })
             .collect(),
-    )?;
-    Ok(report)
+    )
 }
 
 /// The report as Markdown.
