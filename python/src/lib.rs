@@ -66,6 +66,22 @@ impl Core {
     }
 }
 
+/// The build configuration of a quality preset (Embree's names), with the watertight triangle
+/// test and conservative boxes if asked.
+fn build_config(watertight: bool, quality: &str) -> PyResult<BuildConfig> {
+    let preset = match quality {
+        "fast" => BuildConfig::fast(),
+        "medium" => BuildConfig::default(),
+        "high" => BuildConfig::high(),
+        q => return Err(value_error(format!("quality must be \"fast\", \"medium\" or \"high\", got {q:?}"))),
+    };
+    Ok(if watertight {
+        preset.with_tests(strahl::TriangleTest::Watertight, strahl::BoxTest::Conservative)
+    } else {
+        preset
+    })
+}
+
 /// A pool of `threads` threads (0: one per core).
 fn make_pool(threads: usize) -> PyResult<rayon::ThreadPool> {
     rayon::ThreadPoolBuilder::new()
@@ -299,17 +315,7 @@ impl Core {
             ids.push((*g, *id));
         }
         let pool = make_pool(threads)?;
-        let preset = match quality {
-            "fast" => BuildConfig::fast(),
-            "medium" => BuildConfig::default(),
-            "high" => BuildConfig::high(),
-            q => return Err(value_error(format!("quality must be \"fast\", \"medium\" or \"high\", got {q:?}"))),
-        };
-        let cfg = if watertight {
-            preset.with_tests(strahl::TriangleTest::Watertight, strahl::BoxTest::Conservative)
-        } else {
-            preset
-        };
+        let cfg = build_config(watertight, quality)?;
         let flat = placements.is_empty();
         let world = py.detach(|| {
             pool.install(|| -> strahl::Result<World> {
@@ -322,6 +328,41 @@ impl Core {
             })
         });
         Ok(Self::of(world.map_err(value_error)?, pool))
+    }
+
+    /// The scene of a scene file (`data/README.md`): its meshes, analytic spheres and solids
+    /// (CSG, superquadrics, blobs, closed meshes), placed by its instances. A hit reports as
+    /// geometry id the index of its instance's `[mesh.*]` table (in name order) and as instance
+    /// id the index of its `[[instance]]`. A file that cannot be read is an `OSError`; one that
+    /// is malformed or describes bad geometry a `ValueError` naming the entry.
+    #[staticmethod]
+    #[pyo3(signature = (path, threads, watertight, quality))]
+    fn from_scene_file(
+        py: Python<'_>,
+        path: std::path::PathBuf,
+        threads: usize,
+        watertight: bool,
+        quality: &str,
+    ) -> PyResult<Self> {
+        let pool = make_pool(threads)?;
+        let cfg = build_config(watertight, quality)?;
+        let built = py.detach(|| {
+            pool.install(|| -> strahl::Result<(InstancedScene, Vec<(u32, u32)>)> {
+                let file = strahl::SceneFile::read(&path)?;
+                let scene = file.build(&cfg)?;
+                let ids = file.instances.iter().enumerate().map(|(i, inst)| (inst.object as u32, i as u32)).collect();
+                Ok((scene, ids))
+            })
+        });
+        let (scene, ids) = built.map_err(|e| match e {
+            strahl::Error::Io { cause, .. } => pyo3::exceptions::PyOSError::new_err((
+                cause.raw_os_error().unwrap_or(0),
+                cause.to_string(),
+                path.display().to_string(),
+            )),
+            e => value_error(e),
+        })?;
+        Ok(Self::of(World::Instanced { scene, ids }, pool))
     }
 
     /// The built scene as bytes, for pickling: `(instanced, bytes, instance ids)`; see

@@ -72,6 +72,31 @@ class RaycastingScene:
         self._instance_count = 0
         self._core: Optional[_strahl.Core] = None
         self._lock = threading.Lock()
+        # The scene file this scene was read from, if any: then it takes no more geometry.
+        self._scene_file: Optional[str] = None
+
+    @classmethod
+    def from_scene_file(
+        cls, path: Any, threads: int = 0, watertight: bool = True, quality: str = "medium"
+    ) -> "RaycastingScene":
+        """The scene of a strahl scene file (TOML, see ``data/README.md``): its triangle meshes,
+        analytic spheres and solids (CSG trees of spheres, boxes, cylinders, cones, tori,
+        quadrics, superquadrics, blobs and closed meshes), placed by its ``[[instance]]``\ s.
+
+        A hit's ``geometry_ids`` is the index of its instance's ``[mesh.*]`` table (tables in
+        name order), ``instance_ids`` the index of the ``[[instance]]``, ``primitive_ids`` the
+        triangle, sphere, or the solid's primitive (depth first). Such a scene takes no further
+        ``add_triangles``/``add_instances``. A file that cannot be read raises ``OSError``; a
+        malformed one, or one describing bad geometry, ``ValueError`` naming the entry.
+        """
+        scene = cls(threads, watertight, quality)
+        scene._core = _strahl.Core.from_scene_file(str(path), scene._threads, scene._watertight, scene._quality)
+        scene._scene_file = str(path)
+        return scene
+
+    def _check_open(self) -> None:
+        if self._scene_file is not None:
+            raise ValueError(f"this scene was read from the scene file {self._scene_file!r}; it takes no more geometry")
 
     # -- building -----------------------------------------------------------------------------
 
@@ -84,6 +109,7 @@ class RaycastingScene:
         passed alone. NaN vertices and zero-area triangles are kept in the mesh but can never
         be hit.
         """
+        self._check_open()
         if triangle_indices is None:
             vertex_positions, triangle_indices = _mesh_arrays(vertex_positions)
         v, _ = _float_rows(vertex_positions, 3, "vertex_positions")
@@ -115,6 +141,7 @@ class RaycastingScene:
         object's space without renormalizing, so ``t_hit`` is the world-space distance in
         units of the ray's direction.
         """
+        self._check_open()
         t = np.asarray(transforms, dtype=np.float64)
         if t.shape == (4, 4):
             t = t[None]
@@ -266,6 +293,7 @@ class RaycastingScene:
                 "geometries": list(self._geometries),
                 "instances": list(self._instances),
                 "instance_count": self._instance_count,
+                "scene_file": self._scene_file,
             }
             if self._core is not None:
                 state["built"] = self._core.serialize()
@@ -276,6 +304,7 @@ class RaycastingScene:
         self._geometries = list(state["geometries"])
         self._instances = list(state["instances"])
         self._instance_count = state["instance_count"]
+        self._scene_file = state.get("scene_file")
         if "built" in state:
             instanced, data, ids = state["built"]
             self._core = _strahl.Core.deserialize(instanced, data, ids, self._threads)

@@ -445,3 +445,57 @@ def test_load_obj(tmp_path):
     bad.write_text("v 0 0 0\nv 1 0\nf 1 2 3\n")
     with pytest.raises(ValueError, match="line"):
         strahl.load_obj(bad)
+
+
+# -- scene files: solids --------------------------------------------------------------------
+
+
+SOLIDS_TOML = """
+[mesh.ball]
+solid = { difference = [ { sphere = { radius = 1.0 } }, { box = { min = [0.0, 0.0, 0.0], max = [2.0, 2.0, 2.0] } } ] }
+
+[mesh.ring]
+solid = { supertoroid = { major = 1.0, minor = 0.25, e = 0.5, n = 0.5 } }
+
+[[instance]]
+mesh = "ball"
+
+[[instance]]
+mesh = "ring"
+translate = [5.0, 0.0, 0.0]
+"""
+
+
+def test_scene_file_solids(tmp_path):
+    path = tmp_path / "solids.toml"
+    path.write_text(SOLIDS_TOML)
+    scene = strahl.RaycastingScene.from_scene_file(path, threads=2)
+    # Straight down onto the ball: outside the cut-away octant the top of the sphere (t = 4),
+    # inside it the cut face z = 0 (t = 5) where the sphere's cap was removed.
+    rays = np.array([[-0.3, -0.2, 5, 0, 0, -1], [0.3, 0.2, 5, 0, 0, -1], [5.0, 5.0, 5, 0, 0, -1]], np.float32)
+    hits = scene.cast_rays(rays)
+    expected = 5 - np.sqrt(1 - 0.13)
+    assert abs(hits["t_hit"][0] - expected) < 1e-5
+    assert abs(hits["t_hit"][1] - 5.0) < 1e-5
+    assert np.isinf(hits["t_hit"][2])
+    # Geometry ids are the mesh tables in name order ("ball", "ring"); instance ids the
+    # [[instance]]s.
+    assert list(hits["geometry_ids"][:2]) == [0, 0] and list(hits["instance_ids"][:2]) == [0, 0]
+    # Along x through the squared ring (centre x = 5): crossings at 5 ± 1 ± 0.25.
+    ring = np.array([[2.0, 0.0, 0.0, 1, 0, 0]], np.float32)
+    h = scene.cast_rays(ring)
+    assert abs(h["t_hit"][0] - 1.75) < 1e-5 and h["geometry_ids"][0] == 1 and h["instance_ids"][0] == 1
+    assert scene.count_intersections(ring)[0] == 4
+    clone = pickle.loads(pickle.dumps(scene))
+    assert np.array_equal(clone.cast_rays(rays)["t_hit"], hits["t_hit"])
+    with pytest.raises(ValueError, match="scene file"):
+        scene.add_triangles(*box())
+
+
+def test_scene_file_errors(tmp_path):
+    with pytest.raises(OSError):
+        strahl.RaycastingScene.from_scene_file(tmp_path / "missing.toml")
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[mesh.r]\nsolid = { supertoroid = { major = 1.0, minor = 2.0 } }\n[[instance]]\nmesh = \"r\"\n")
+    with pytest.raises(ValueError, match="supertoroid"):
+        strahl.RaycastingScene.from_scene_file(bad)
