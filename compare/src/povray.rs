@@ -89,21 +89,7 @@ fn solid_sdl(solid: &strahl::Solid, textures: &mut std::slice::Iter<'_, String>,
                 Primitive::Blob(ref b) => blob_sdl(b),
                 // POV-Ray's mesh2 is a solid in CSG once it has an inside vector (its own
                 // parity test along that direction).
-                Primitive::Mesh(ref m) => {
-                    let mesh = m.mesh();
-                    let mut s = format!("mesh2 {{ vertex_vectors {{ {}", mesh.positions().len());
-                    for p in mesh.positions() {
-                        write!(s, ", {}", v(*p)).unwrap();
-                    }
-                    let tris: Vec<usize> = (0..mesh.triangle_count()).filter(|&i| mesh.is_hittable(i)).collect();
-                    write!(s, " }} face_indices {{ {}", tris.len()).unwrap();
-                    for &i in &tris {
-                        let [a, b, c] = mesh.indices()[i];
-                        write!(s, ", <{a}, {b}, {c}>").unwrap();
-                    }
-                    s.push_str(" } inside_vector <0.31, 0.73, 0.61>");
-                    s
-                }
+                Primitive::Mesh(ref m) => format!("{} inside_vector <0.31, 0.73, 0.61>", mesh2_open(m.mesh(), false)),
                 // A Rust closure has no SDL (and scene files cannot hold one): an empty
                 // isosurface over its box, so the rest of the scene still renders.
                 Primitive::Implicit(ref im) => {
@@ -254,7 +240,13 @@ fn blob_sdl(b: &strahl::Blob) -> String {
 }
 
 fn mesh_sdl(name: &str, m: &TriangleMesh, smooth: bool) -> String {
-    let mut s = format!("#declare {name} = mesh2 {{\n  vertex_vectors {{ {}", m.positions().len());
+    format!("#declare {name} = {}}}\n", mesh2_open(m, smooth))
+}
+
+/// A `mesh2` of `m` without its closing brace (a solid adds its inside vector and texture):
+/// vertices, the vertex normals if `smooth`, and the hittable triangles.
+fn mesh2_open(m: &TriangleMesh, smooth: bool) -> String {
+    let mut s = format!("mesh2 {{\n  vertex_vectors {{ {}", m.positions().len());
     for p in m.positions() {
         write!(s, ", {}", v(*p)).unwrap();
     }
@@ -275,7 +267,7 @@ fn mesh_sdl(name: &str, m: &TriangleMesh, smooth: bool) -> String {
         let [a, b, c] = m.indices()[i];
         write!(s, ", <{a}, {b}, {c}>").unwrap();
     }
-    s.push_str(" }\n}\n");
+    s.push_str(" }\n");
     s
 }
 

@@ -82,6 +82,19 @@ fn build_config(watertight: bool, quality: &str) -> PyResult<BuildConfig> {
     })
 }
 
+/// An error reading `path`: `OSError` (errno, message, file name) if it could not be read,
+/// `ValueError` otherwise.
+fn file_error(e: strahl::Error, path: &std::path::Path) -> PyErr {
+    match e {
+        strahl::Error::Io { cause, .. } => pyo3::exceptions::PyOSError::new_err((
+            cause.raw_os_error().unwrap_or(0),
+            cause.to_string(),
+            path.display().to_string(),
+        )),
+        e => value_error(e),
+    }
+}
+
 /// A pool of `threads` threads (0: one per core).
 fn make_pool(threads: usize) -> PyResult<rayon::ThreadPool> {
     rayon::ThreadPoolBuilder::new()
@@ -354,14 +367,7 @@ impl Core {
                 Ok((scene, ids))
             })
         });
-        let (scene, ids) = built.map_err(|e| match e {
-            strahl::Error::Io { cause, .. } => pyo3::exceptions::PyOSError::new_err((
-                cause.raw_os_error().unwrap_or(0),
-                cause.to_string(),
-                path.display().to_string(),
-            )),
-            e => value_error(e),
-        })?;
+        let (scene, ids) = built.map_err(|e| file_error(e, &path))?;
         Ok(Self::of(World::Instanced { scene, ids }, pool))
     }
 
@@ -635,14 +641,7 @@ impl Core {
 /// `OSError`; a malformed one (the error names the line) a `ValueError`.
 #[pyfunction]
 fn load_obj<'py>(py: Python<'py>, path: std::path::PathBuf) -> PyResult<Vec<(Arr2<'py, f32>, Arr2<'py, u32>)>> {
-    let meshes = py.detach(|| strahl::load_obj(&path)).map_err(|e| match e {
-        strahl::Error::Io { cause, .. } => pyo3::exceptions::PyOSError::new_err((
-            cause.raw_os_error().unwrap_or(0),
-            cause.to_string(),
-            path.display().to_string(),
-        )),
-        e => value_error(e),
-    })?;
+    let meshes = py.detach(|| strahl::load_obj(&path)).map_err(|e| file_error(e, &path))?;
     meshes
         .iter()
         .map(|m| {
