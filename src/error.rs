@@ -118,6 +118,10 @@ pub enum Error {
         /// Why.
         message: String,
     },
+    /// [`set_isa`](crate::simd::set_isa) asked for an instruction-set level this processor
+    /// cannot run.
+    #[error("this processor cannot run strahl's {0} kernels")]
+    UnsupportedIsa(&'static str),
     /// A scene has more geometries than geometry ids can name.
     #[error("scene has {0} geometries; at most 2^32 - 1 are supported (2^29 with the Badouel test)")]
     TooManyGeometries(usize),

@@ -35,7 +35,7 @@ use crate::geometry::watertight::Watertight;
 use crate::ray::{Hit, HitPacket, Ray, RayPacket};
 use crate::scene::{Query, Scene, each_hit};
 use crate::shapes::SphereSet;
-use crate::simd::{Pf, lane_mask};
+use crate::simd::{Level, Packet, SimdF, with_level};
 
 /// One placement of an object: `object` indexes the objects of the [`InstancedScene`], and
 /// `transform` maps object space to world space.
@@ -345,91 +345,107 @@ impl InstancedScene {
         if self.root == EMPTY {
             return None;
         }
-        with_stack(|stack| dispatch!(self.test, self.box_test, |K, C| self.trace1_with::<ANY, K, C>(ray, stack)))
+        with_stack(|stack| {
+            dispatch!(self.test, self.box_test, |K, C| with_level!(|L| self.trace1_with::<ANY, K, C, L>(ray, stack)))
+        })
     }
 
     /// The instance level's walk; at each instance the object's walk continues on the same stack
     /// with the same kernel, so entering an instance costs one transform and no dispatch.
     /// Invalid rays miss.
-    fn trace1_with<const ANY: bool, K: Kernel, const CONS: bool>(
+    #[inline(never)]
+    fn trace1_with<const ANY: bool, K: Kernel, const CONS: bool, L: Level>(
         &self,
         ray: &Ray,
         stack: &mut Stack,
     ) -> Option<(u32, ObjHit)> {
-        // Read field by field, as the object walks do (see `Ray::read_fields`), once for both
-        // the validity check and the walk.
-        let ray = ray.read_fields();
-        if !ray.is_valid() {
-            return None;
-        }
-        self.trace1_from::<ANY, K, CONS>(&ray.clamped_to_zero(), self.root, stack)
+        L::call(
+            #[inline(always)]
+            || {
+                // Read field by field, as the object walks do (see `Ray::read_fields`), once for
+                // both the validity check and the walk.
+                let ray = ray.read_fields();
+                if !ray.is_valid() {
+                    return None;
+                }
+                self.trace1_from::<ANY, K, CONS, L>(&ray.clamped_to_zero(), self.root, stack)
+            },
+        )
     }
 
     /// [`trace1_with`](Self::trace1_with) over the instance subtree at `root`.
     #[inline(always)]
-    fn trace1_from<const ANY: bool, K: Kernel, const CONS: bool>(
+    fn trace1_from<const ANY: bool, K: Kernel, const CONS: bool, L: Level>(
         &self,
         ray: &Ray,
         root: u32,
         stack: &mut Stack,
     ) -> Option<(u32, ObjHit)> {
-        self.trace1_from_terms::<ANY, K, CONS>(ray, SlabTerms::of(ray), root, stack)
+        self.trace1_from_terms::<ANY, K, CONS, L>(ray, SlabTerms::of(ray), root, stack)
     }
 
     /// [`trace1_from`](Self::trace1_from) with the ray's slab terms already computed (a packet's
     /// lane).
     #[inline(always)]
-    fn trace1_from_terms<const ANY: bool, K: Kernel, const CONS: bool>(
+    fn trace1_from_terms<const ANY: bool, K: Kernel, const CONS: bool, L: Level>(
         &self,
         ray: &Ray,
         terms: SlabTerms,
         root: u32,
         stack: &mut Stack,
     ) -> Option<(u32, ObjHit)> {
-        let br = BoxRay::with_terms(terms, ray.tnear);
+        let br = BoxRay::<L>::with_terms(terms, ray.tnear);
         let mut tfar = ray.tfar;
         let mut best = None;
         let base = stack.push_root(root);
-        walk1::<ANY, CONS>(self.instance_tree(), &br, stack, base, &mut tfar, |leaf, tfar, stack| {
-            let (start, count) = leaf_blocks(leaf);
-            for k in start..start + count {
-                let p = &self.placed[k];
-                let r = object_ray(&p.to_object, ray, *tfar);
-                // Finite in, finite out, except where a huge scale overflows: such rays miss.
-                if !(r.origin.is_finite() && r.dir.is_finite()) {
-                    continue;
-                }
-                let object = &self.objects[p.object as usize];
-                if let Some(h) = object.bvh().trace1_with::<ANY, false, K, CONS>(&r, stack) {
-                    *tfar = h.t;
-                    best = Some((k as u32, ObjHit::Tri(h)));
-                    if ANY {
-                        return true;
+        walk1::<ANY, CONS, L>(
+            self.instance_tree(),
+            &br,
+            stack,
+            base,
+            &mut tfar,
+            #[inline(always)]
+            |leaf, tfar, stack| {
+                let (start, count) = leaf_blocks(leaf);
+                for k in start..start + count {
+                    let p = &self.placed[k];
+                    let r = object_ray(&p.to_object, ray, *tfar);
+                    // Finite in, finite out, except where a huge scale overflows: such rays miss.
+                    if !(r.origin.is_finite() && r.dir.is_finite()) {
+                        continue;
+                    }
+                    let object = &self.objects[p.object as usize];
+                    if let Some(h) = object.bvh().trace1_with::<ANY, false, K, CONS, L>(&r, stack) {
+                        *tfar = h.t;
+                        best = Some((k as u32, ObjHit::Tri(h)));
+                        if ANY {
+                            return true;
+                        }
+                    }
+                    let spheres = object.sphere_tree();
+                    if !spheres.is_empty()
+                        && let Some(h) = spheres.trace1_on::<ANY, CONS>(&Ray { tfar: *tfar, ..r }, stack)
+                    {
+                        *tfar = h.t;
+                        best = Some((k as u32, ObjHit::Sphere(p.sphere_hit(h))));
+                        if ANY {
+                            return true;
+                        }
+                    }
+                    let solids = object.solid_tree();
+                    if !solids.is_empty()
+                        && let Some(h) = solids.trace1_on::<ANY, CONS>(&Ray { tfar: *tfar, ..r }, stack)
+                    {
+                        *tfar = h.t;
+                        best = Some((k as u32, ObjHit::Sphere(p.sphere_hit(h))));
+                        if ANY {
+                            return true;
+                        }
                     }
                 }
-                let spheres = object.sphere_tree();
-                if !spheres.is_empty()
-                    && let Some(h) = spheres.trace1_on::<ANY, CONS>(&Ray { tfar: *tfar, ..r }, stack)
-                {
-                    *tfar = h.t;
-                    best = Some((k as u32, ObjHit::Sphere(p.sphere_hit(h))));
-                    if ANY {
-                        return true;
-                    }
-                }
-                let solids = object.solid_tree();
-                if !solids.is_empty()
-                    && let Some(h) = solids.trace1_on::<ANY, CONS>(&Ray { tfar: *tfar, ..r }, stack)
-                {
-                    *tfar = h.t;
-                    best = Some((k as u32, ObjHit::Sphere(p.sphere_hit(h))));
-                    if ANY {
-                        return true;
-                    }
-                }
-            }
-            false
-        });
+                false
+            },
+        );
         best
     }
 
@@ -437,11 +453,28 @@ impl InstancedScene {
     /// that hit (are occluded).
     fn trace_packet<const ANY: bool>(&self, p: &RayPacket, hit: &mut HitPacket) -> u32 {
         with_stack(|stack| {
-            dispatch!(self.test, self.box_test, |K, C| self.trace_packet_with::<ANY, K, C>(p, hit, stack))
+            dispatch!(self.test, self.box_test, |K, C| with_level!(
+                |L| self.trace_packet_with::<ANY, K, C, L>(p, hit, stack)
+            ))
         })
     }
 
-    fn trace_packet_with<const ANY: bool, K: Kernel, const CONS: bool>(
+    #[inline(never)]
+    fn trace_packet_with<const ANY: bool, K: Kernel, const CONS: bool, L: Level>(
+        &self,
+        p: &RayPacket,
+        hit: &mut HitPacket,
+        stack: &mut Stack,
+    ) -> u32 {
+        L::call(
+            #[inline(always)]
+            || self.trace_packet_in::<ANY, K, CONS, L>(p, hit, stack),
+        )
+    }
+
+    /// [`trace_packet_with`](Self::trace_packet_with)'s body, compiled for the level.
+    #[inline(always)]
+    fn trace_packet_in<const ANY: bool, K: Kernel, const CONS: bool, L: Level>(
         &self,
         p: &RayPacket,
         hit: &mut HitPacket,
@@ -451,7 +484,7 @@ impl InstancedScene {
         if self.root == EMPTY {
             return 0;
         }
-        let Some((pb, mut tfar)) = PacketBoxes::new(p) else {
+        let Some((pb, mut tfar)) = PacketBoxes::<L>::new(p) else {
             return 0;
         };
         let base = stack.push_root(self.root);
@@ -460,102 +493,114 @@ impl InstancedScene {
         let spread = if !ANY && pb.frustum.is_none() { pb.origin_extent() } else { 0.0 };
         // One object's hits, before they are turned to world space.
         let mut r = HitPacket::default();
-        walk_packet::<ANY, CONS>(self.instance_tree(), &pb, stack, base, &mut tfar, |leaf, lanes, tfar, stack| {
-            if lanes != 0 {
-                // A few lanes walk this part of the instance tree one at a time.
-                out.mask |= each_lane_alone::<ANY, _>(
-                    p,
-                    lanes,
-                    tfar,
-                    |l, ray| {
-                        let (k, h) = self.trace1_from_terms::<ANY, K, CONS>(ray, pb.slabs.lane(l), leaf, stack)?;
-                        Some((h.t(), (k, h)))
-                    },
-                    |l, (k, h)| out.set(l, &self.world_hit(k, &self.object_hit(k, &h))),
-                );
-                return ANY && out.mask == pb.live;
-            }
-            let (start, count) = leaf_blocks(leaf);
-            for k in start..start + count {
-                let pl = &self.placed[k];
-                // Only the lanes that enter this instance's box go into the object.
-                let active = pb.lanes_in_box::<CONS>(pl.lo, pl.hi, *tfar) & pb.live;
-                if active == 0 {
-                    continue;
-                }
-                let (q, [qo, qd]) = object_packet(&pl.to_object, &pb, *tfar, active);
-                let bvh = self.objects[pl.object as usize].bvh();
-                let spheres = self.objects[pl.object as usize].sphere_tree();
-                let solids = self.objects[pl.object as usize].solid_tree();
-                if !ANY && pb.frustum.is_none() && !packet_walks_object(active, spread, pl) {
-                    // Incoherent closest-hit rays: each lane that enters the instance walks the
-                    // object alone, as Embree's instances hand their lanes to the object's hybrid
-                    // walk, which takes single rays for so few lanes. Diffuse packets run 10–15%
-                    // faster this way than through the object's packet walk; occlusion packets lost
-                    // 13% on the forest, so they keep it (PERFORMANCE.md). Many lanes from nearby
-                    // origins take the object's packet walk instead (`packet_walks_object`). The
-                    // lanes' slab terms are computed here, 16 at a time.
-                    let qs = LaneSlabs::of(&qo, &qd);
-                    out.mask |= each_lane_alone::<false, _>(
-                        &q,
-                        active,
+        walk_packet::<ANY, CONS, L>(
+            self.instance_tree(),
+            &pb,
+            stack,
+            base,
+            &mut tfar,
+            #[inline(always)]
+            |leaf, lanes, tfar, stack| {
+                if lanes != 0 {
+                    // A few lanes walk this part of the instance tree one at a time.
+                    out.mask |= each_lane_alone::<ANY, _, L>(
+                        p,
+                        lanes,
                         tfar,
+                        #[inline(always)]
                         |l, ray| {
-                            let tri = bvh.trace1_from_terms::<false, K, CONS>(ray, qs.lane(l), bvh.root, stack);
-                            let tri = tri.map(|h| bvh.hit_record(&h));
-                            if spheres.is_empty() && solids.is_empty() {
-                                return tri.map(|h| (h.t, h));
-                            }
-                            let bounded = Ray { tfar: tri.map_or(ray.tfar, |h| h.t), ..*ray };
-                            let sphere = spheres.trace1_on::<false, CONS>(&bounded, stack).map(|h| pl.sphere_hit(h));
-                            let near = sphere.or(tri);
-                            let bounded = Ray { tfar: near.map_or(ray.tfar, |h| h.t), ..*ray };
-                            let solid = solids.trace1_on::<false, CONS>(&bounded, stack).map(|h| pl.sphere_hit(h));
-                            solid.or(near).map(|h| (h.t, h))
+                            let (k, h) =
+                                self.trace1_from_terms::<ANY, K, CONS, L>(ray, pb.slabs.lane(l), leaf, stack)?;
+                            Some((h.t(), (k, h)))
                         },
-                        |l, h| out.set(l, &self.world_hit(k as u32, &h)),
+                        |l, (k, h)| out.set(l, &self.world_hit(k, &self.object_hit(k, &h))),
                     );
-                    continue;
+                    return ANY && out.mask == pb.live;
                 }
-                // The object's triangles, then its spheres and its solids, each bounded by the
-                // hits before.
-                for part in 0..3 {
-                    let mask = if part == 0 {
-                        bvh.trace_packet_with::<ANY, K, CONS>(&q, &mut r, stack)
-                    } else if (part == 1 && spheres.is_empty()) || (part == 2 && solids.is_empty()) {
-                        0
-                    } else {
-                        let bounded = RayPacket { tfar: tfar.to_array(), ..q };
-                        let m = if part == 1 {
-                            spheres.trace_packet_on::<ANY, CONS>(&bounded, &mut r, stack)
-                        } else {
-                            solids.trace_packet_on::<ANY, CONS>(&bounded, &mut r, stack)
-                        };
-                        if pl.mirror {
-                            for l in 0..r.t.len() {
-                                (r.ng_x[l], r.ng_y[l], r.ng_z[l]) = (-r.ng_x[l], -r.ng_y[l], -r.ng_z[l]);
-                            }
-                        }
-                        m
-                    };
-                    if mask == 0 {
+                let (start, count) = leaf_blocks(leaf);
+                for k in start..start + count {
+                    let pl = &self.placed[k];
+                    // Only the lanes that enter this instance's box go into the object.
+                    let active = pb.lanes_in_box::<CONS>(pl.lo, pl.hi, *tfar) & pb.live;
+                    if active == 0 {
                         continue;
                     }
-                    let valid = lane_mask(mask);
-                    out.mask |= mask;
-                    if ANY {
-                        *tfar = valid.select(Pf::splat(f32::NEG_INFINITY), *tfar);
-                        if out.mask == pb.live {
-                            return true;
+                    let (q, [qo, qd]) = object_packet::<L>(&pl.to_object, &pb, *tfar, active);
+                    let bvh = self.objects[pl.object as usize].bvh();
+                    let spheres = self.objects[pl.object as usize].sphere_tree();
+                    let solids = self.objects[pl.object as usize].solid_tree();
+                    if !ANY && pb.frustum.is_none() && !packet_walks_object(active, spread, pl) {
+                        // Incoherent closest-hit rays: each lane that enters the instance walks the
+                        // object alone, as Embree's instances hand their lanes to the object's hybrid
+                        // walk, which takes single rays for so few lanes. Diffuse packets run 10–15%
+                        // faster this way than through the object's packet walk; occlusion packets lost
+                        // 13% on the forest, so they keep it (PERFORMANCE.md). Many lanes from nearby
+                        // origins take the object's packet walk instead (`packet_walks_object`). The
+                        // lanes' slab terms are computed here, 16 at a time.
+                        let qs = LaneSlabs::<L>::of(&qo, &qd);
+                        out.mask |= each_lane_alone::<false, _, L>(
+                            &q,
+                            active,
+                            tfar,
+                            #[inline(always)]
+                            |l, ray| {
+                                let tri = bvh.trace1_from_terms::<false, K, CONS, L>(ray, qs.lane(l), bvh.root, stack);
+                                let tri = tri.map(|h| bvh.hit_record(&h));
+                                if spheres.is_empty() && solids.is_empty() {
+                                    return tri.map(|h| (h.t, h));
+                                }
+                                let bounded = Ray { tfar: tri.map_or(ray.tfar, |h| h.t), ..*ray };
+                                let sphere =
+                                    spheres.trace1_on::<false, CONS>(&bounded, stack).map(|h| pl.sphere_hit(h));
+                                let near = sphere.or(tri);
+                                let bounded = Ray { tfar: near.map_or(ray.tfar, |h| h.t), ..*ray };
+                                let solid = solids.trace1_on::<false, CONS>(&bounded, stack).map(|h| pl.sphere_hit(h));
+                                solid.or(near).map(|h| (h.t, h))
+                            },
+                            |l, h| out.set(l, &self.world_hit(k as u32, &h)),
+                        );
+                        continue;
+                    }
+                    // The object's triangles, then its spheres and its solids, each bounded by the
+                    // hits before.
+                    for part in 0..3 {
+                        let mask = if part == 0 {
+                            bvh.trace_packet_with::<ANY, K, CONS, L>(&q, &mut r, stack)
+                        } else if (part == 1 && spheres.is_empty()) || (part == 2 && solids.is_empty()) {
+                            0
+                        } else {
+                            let bounded = RayPacket { tfar: tfar.to_array(), ..q };
+                            let m = if part == 1 {
+                                spheres.trace_packet_on::<ANY, CONS>(&bounded, &mut r, stack)
+                            } else {
+                                solids.trace_packet_on::<ANY, CONS>(&bounded, &mut r, stack)
+                            };
+                            if pl.mirror {
+                                for l in 0..r.t.len() {
+                                    (r.ng_x[l], r.ng_y[l], r.ng_z[l]) = (-r.ng_x[l], -r.ng_y[l], -r.ng_z[l]);
+                                }
+                            }
+                            m
+                        };
+                        if mask == 0 {
+                            continue;
                         }
-                    } else {
-                        *tfar = valid.select(Pf::new(r.t), *tfar);
-                        out.take_instanced(valid, &r, &pl.normal_to_world, pl.id);
+                        let valid = L::Pf::lane_mask(mask);
+                        out.mask |= mask;
+                        if ANY {
+                            *tfar = valid.select(L::Pf::splat(f32::NEG_INFINITY), *tfar);
+                            if out.mask == pb.live {
+                                return true;
+                            }
+                        } else {
+                            *tfar = valid.select(L::Pf::new(r.t), *tfar);
+                            out.take_instanced::<L>(valid, &r, &pl.normal_to_world, pl.id);
+                        }
                     }
                 }
-            }
-            false
-        });
+                false
+            },
+        );
         out.mask
     }
 
@@ -656,14 +701,19 @@ fn object_ray(to_object: &Affine3A, ray: &Ray, tfar: f32) -> Ray {
 /// The lanes `active` of a packet in object space, with their current `tfar`, and the moved
 /// origins and directions as vectors.
 #[inline(always)]
-fn object_packet(to_object: &Affine3A, pb: &PacketBoxes, tfar: Pf, active: u32) -> (RayPacket, [[Pf; 3]; 2]) {
+fn object_packet<L: Level>(
+    to_object: &Affine3A,
+    pb: &PacketBoxes<L>,
+    tfar: L::Pf,
+    active: u32,
+) -> (RayPacket, [[L::Pf; 3]; 2]) {
     let m = to_object.matrix3;
     let tr = to_object.translation;
     // The operations and their order of glam's `transform_point3` / `transform_vector3` (no fused
     // multiply-add), so a lane is moved exactly as the single-ray query moves it.
-    let row = |a: usize, v: &[Pf; 3], with_t: bool| {
-        let x = v[0] * Pf::splat(m.x_axis[a]) + v[1] * Pf::splat(m.y_axis[a]) + v[2] * Pf::splat(m.z_axis[a]);
-        if with_t { x + Pf::splat(tr[a]) } else { x }
+    let row = |a: usize, v: &[L::Pf; 3], with_t: bool| {
+        let x = v[0] * L::Pf::splat(m.x_axis[a]) + v[1] * L::Pf::splat(m.y_axis[a]) + v[2] * L::Pf::splat(m.z_axis[a]);
+        if with_t { x + L::Pf::splat(tr[a]) } else { x }
     };
     let o = [row(0, &pb.o, true), row(1, &pb.o, true), row(2, &pb.o, true)];
     let d = [row(0, &pb.d, false), row(1, &pb.d, false), row(2, &pb.d, false)];

@@ -62,6 +62,7 @@ pub use scene_file::SceneFile;
 pub use shapes::{
     Blob, BlobComponent, CsgOp, Implicit, MeshSolid, Potential, Primitive, QuarticSolver, Solid, SphereSet, SphereTest,
 };
+pub use simd::{Isa, isa, set_isa};
 
 /// The README's code examples run as doctests.
 #[cfg(doctest)]

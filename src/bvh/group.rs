@@ -58,13 +58,27 @@ impl Bvh {
         with_stack(|stack| {
             dispatch!(self.test, self.box_test, |K, C| {
                 let mut out = hits.each_mut().map(PacketHits::new);
-                self.trace_group_with::<K, C>(ps, &mut out, stack)
+                with_level!(|L| self.trace_group_with::<K, C, L>(ps, &mut out, stack))
             })
         })
     }
 
     #[inline(never)]
-    pub(crate) fn trace_group_with<K: Kernel, const CONS: bool>(
+    pub(crate) fn trace_group_with<K: Kernel, const CONS: bool, L: Level>(
+        &self,
+        ps: &[RayPacket; GROUP],
+        out: &mut [PacketHits<'_>; GROUP],
+        stack: &mut Stack,
+    ) {
+        L::call(
+            #[inline(always)]
+            || self.trace_group_in::<K, CONS, L>(ps, out, stack),
+        )
+    }
+
+    /// [`trace_group_with`](Self::trace_group_with)'s body, compiled for the level.
+    #[inline(always)]
+    fn trace_group_in<K: Kernel, const CONS: bool, L: Level>(
         &self,
         ps: &[RayPacket; GROUP],
         out: &mut [PacketHits<'_>; GROUP],
@@ -76,21 +90,21 @@ impl Bvh {
         // Per packet with a live lane: its frustum, triangle-test terms and `tfar`; and the
         // frustum bounding them all (`None` unless all share one origin and octant).
         let mut subs = 0u32;
-        let mut sf: [Frustum; GROUP] = Default::default();
-        let mut rk: [RayK; GROUP] = std::array::from_fn(|_| RayK {
-            o: [Pf::splat(0.0); 3],
-            d: [Pf::splat(0.0); 3],
-            tnear: Pf::splat(f32::INFINITY),
+        let mut sf: [Frustum<L>; GROUP] = Default::default();
+        let mut rk: [RayK<L>; GROUP] = std::array::from_fn(|_| RayK {
+            o: [L::Pf::splat(0.0); 3],
+            d: [L::Pf::splat(0.0); 3],
+            tnear: L::Pf::splat(f32::INFINITY),
         });
         let mut live = [0u32; GROUP];
-        let mut tfar = [Pf::splat(f32::NEG_INFINITY); GROUP];
-        let mut group: Option<Frustum> = None;
+        let mut tfar = [L::Pf::splat(f32::NEG_INFINITY); GROUP];
+        let mut group: Option<Frustum<L>> = None;
         let mut shared = true;
         for (i, p) in ps.iter().enumerate() {
-            let Some((pb, t)) = PacketBoxes::new(p) else { continue };
+            let Some((pb, t)) = PacketBoxes::<L>::new(p) else { continue };
             subs |= 1 << i;
             group = match (&pb.frustum, &group) {
-                (Some(f), None) => Some(f.clone()),
+                (Some(f), None) => Some(*f),
                 (Some(f), Some(g)) => g.merge(f),
                 (None, _) => None,
             };
@@ -105,27 +119,38 @@ impl Bvh {
         }
         let (Some(gf), true) = (group, shared) else {
             for (p, o) in ps.iter().zip(out.iter_mut()) {
-                self.trace_packet_from::<false, K, CONS>(p, self.root, o, stack);
+                self.trace_packet_from::<false, K, CONS, L>(p, self.root, o, stack);
             }
             return;
         };
-        walk_group::<CONS>(&self.nodes, self.root, &gf, &sf, subs, &mut tfar, stack, |r, m, solo, tfar, stack| {
-            let mut m = m;
-            while m != 0 {
-                let s = m.trailing_zeros() as usize;
-                m &= m - 1;
-                if solo {
-                    // The packet's own walk, with its per-lane mode below its footprint.
-                    let p = RayPacket { tfar: tfar[s].to_array(), active: live[s], ..ps[s] };
-                    self.trace_packet_from::<false, K, CONS>(&p, r, &mut out[s], stack);
-                    let hit = out[s].mask;
-                    tfar[s] =
-                        Pf::new(std::array::from_fn(|l| if hit & (1 << l) != 0 { out[s].hit.t[l] } else { p.tfar[l] }));
-                } else {
-                    self.leaf_packet::<false, K>(r, &rk[s], rk[s].tnear, live[s], &mut tfar[s], &mut out[s]);
+        walk_group::<CONS, L>(
+            &self.nodes,
+            self.root,
+            &gf,
+            &sf,
+            subs,
+            &mut tfar,
+            stack,
+            #[inline(always)]
+            |r, m, solo, tfar, stack| {
+                let mut m = m;
+                while m != 0 {
+                    let s = m.trailing_zeros() as usize;
+                    m &= m - 1;
+                    if solo {
+                        // The packet's own walk, with its per-lane mode below its footprint.
+                        let p = RayPacket { tfar: tfar[s].to_array(), active: live[s], ..ps[s] };
+                        self.trace_packet_from::<false, K, CONS, L>(&p, r, &mut out[s], stack);
+                        let hit = out[s].mask;
+                        tfar[s] = L::Pf::new(std::array::from_fn(|l| {
+                            if hit & (1 << l) != 0 { out[s].hit.t[l] } else { p.tfar[l] }
+                        }));
+                    } else {
+                        self.leaf_packet::<false, K, L>(r, &rk[s], rk[s].tnear, live[s], &mut tfar[s], &mut out[s]);
+                    }
                 }
-            }
-        });
+            },
+        );
     }
 }
 
@@ -136,17 +161,17 @@ impl Bvh {
 /// or leaf smaller than a packet's footprint) for each packet alone; it may use the same stack.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-pub(crate) fn walk_group<const CONS: bool>(
+pub(crate) fn walk_group<const CONS: bool, L: Level>(
     nodes: &[Node],
     root: u32,
-    gf: &Frustum,
-    sf: &[Frustum; GROUP],
+    gf: &Frustum<L>,
+    sf: &[Frustum<L>; GROUP],
     subs: u32,
-    tfar: &mut [Pf; GROUP],
+    tfar: &mut [L::Pf; GROUP],
     stack: &mut Stack,
-    mut leaf: impl FnMut(u32, u32, bool, &mut [Pf; GROUP], &mut Stack),
+    mut leaf: impl FnMut(u32, u32, bool, &mut [L::Pf; GROUP], &mut Stack),
 ) {
-    let mut tmax: [f32; GROUP] = std::array::from_fn(|i| hmax(tfar[i]));
+    let mut tmax: [f32; GROUP] = std::array::from_fn(|i| tfar[i].hmax());
     let mut tfar_max = tmax.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b));
 
     let base = stack.push_root(root);
@@ -171,7 +196,7 @@ pub(crate) fn walk_group<const CONS: bool>(
                 while b != 0 {
                     let s = b.trailing_zeros() as usize;
                     b &= b - 1;
-                    tmax[s] = hmax(tfar[s]);
+                    tmax[s] = tfar[s].hmax();
                 }
                 tfar_max = tmax.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b));
                 continue 'pop;
@@ -192,7 +217,7 @@ pub(crate) fn walk_group<const CONS: bool>(
                 d = gd;
                 cl = [0u32; WIDTH];
                 if fine != 0 {
-                    let (pm, pd, pl, tiny) = per_packet::<CONS>(sf, &tmax, subs, b);
+                    let (pm, pd, pl, tiny) = per_packet::<CONS, L>(sf, &tmax, subs, b);
                     // Leaves stay with the group: each packet tests them anyway.
                     let tiny = tiny & !leaf_children(node);
                     mask &= !fine | pm;
@@ -205,7 +230,7 @@ pub(crate) fn walk_group<const CONS: bool>(
                     }
                 }
             } else {
-                let (pm, pd, pl, tiny) = per_packet::<CONS>(sf, &tmax, lanes & subs, b);
+                let (pm, pd, pl, tiny) = per_packet::<CONS, L>(sf, &tmax, lanes & subs, b);
                 let tiny = tiny & !leaf_children(node);
                 mask = pm;
                 d = pd;
@@ -239,24 +264,27 @@ pub(crate) fn walk_group<const CONS: bool>(
 /// own frustum and `tmax`: the mask, the lowest entry distance per child, the packets that enter
 /// each child, and the children smaller than the footprint of a packet that enters them.
 #[inline(always)]
-fn per_packet<const CONS: bool>(
-    sf: &[Frustum; GROUP],
+fn per_packet<const CONS: bool, L: Level>(
+    sf: &[Frustum<L>; GROUP],
     tmax: &[f32; GROUP],
     subs: u32,
     b: &[[f32; WIDTH]; 6],
 ) -> (u32, [f32; WIDTH], [i32; WIDTH], u32) {
-    let mut packets = Ni::splat(0);
-    let mut dist = Nf::splat(f32::INFINITY);
+    // Bit `s` of a child's lane: packet `s` enters it. Float bit operations only (a mask
+    // compared as a float would be a denormal, zero under DAZ).
+    let mut packets = L::Nf::splat(0.0);
+    let mut dist = L::Nf::splat(f32::INFINITY);
     let mut tiny = 0u32;
     let mut m = subs;
     while m != 0 {
         let s = m.trailing_zeros() as usize;
         m &= m - 1;
         let (hit, tn) = sf[s].test_vec::<CONS>(b, tmax[s]);
-        packets |= bytemuck::cast::<Nf, Ni>(hit) & Ni::splat(1 << s);
+        packets |= hit & L::Nf::splat(f32::from_bits(1 << s));
         dist = hit.select(dist.fast_min(tn), dist);
-        tiny |= sf[s].small(b, &(tn * Nf::splat(SOLO_SCALE)).to_array()) & hit.to_bitmask();
+        tiny |= sf[s].small(b, &(tn * L::Nf::splat(SOLO_SCALE)).to_array()) & hit.to_bitmask();
     }
-    let mask = (!packets.simd_eq(Ni::splat(0))).to_bitmask();
-    (mask, dist.to_array(), packets.to_array(), tiny)
+    let packets = packets.to_array().map(|x| x.to_bits() as i32);
+    let mask = (0..WIDTH).fold(0u32, |m, i| m | ((packets[i] != 0) as u32) << i);
+    (mask, dist.to_array(), packets, tiny)
 }

@@ -37,7 +37,9 @@ impl Bvh {
     /// [`occluded_stream`](Self::occluded_stream) with this tree's kernels, on this thread's stack.
     pub(crate) fn occluded_octant(&self, rays: &RayStream, base: usize, ids: &[u16], octant: u32) -> u32 {
         with_stack(|stack| {
-            dispatch!(self.test, self.box_test, |K, C| self.occluded_stream::<K, C>(rays, base, ids, octant, stack))
+            dispatch!(self.test, self.box_test, |K, C| with_level!(
+                |L| self.occluded_stream::<K, C, L>(rays, base, ids, octant, stack)
+            ))
         })
     }
 
@@ -47,7 +49,23 @@ impl Bvh {
     /// [`octant_of`]); a ray outside it is walked alone. Returns bit `i` set where ray `i` is
     /// occluded. Invalid rays are not occluded.
     #[inline(never)]
-    pub(crate) fn occluded_stream<K: Kernel, const CONS: bool>(
+    pub(crate) fn occluded_stream<K: Kernel, const CONS: bool, L: Level>(
+        &self,
+        rays: &RayStream,
+        base: usize,
+        ids: &[u16],
+        octant: u32,
+        stack: &mut Stack,
+    ) -> u32 {
+        L::call(
+            #[inline(always)]
+            || self.occluded_stream_in::<K, CONS, L>(rays, base, ids, octant, stack),
+        )
+    }
+
+    /// [`occluded_stream`](Self::occluded_stream)'s body, compiled for the level.
+    #[inline(always)]
+    fn occluded_stream_in<K: Kernel, const CONS: bool, L: Level>(
         &self,
         rays: &RayStream,
         base: usize,
@@ -66,7 +84,7 @@ impl Bvh {
             tnear: [0.0; STREAM_RAYS],
             tfar_box: [0.0; STREAM_RAYS],
         };
-        let mut r4 = [Ray4::new(Vec3::ZERO, Vec3::X); STREAM_RAYS];
+        let mut r4 = [Ray4::<L>::new(Vec3::ZERO, Vec3::X); STREAM_RAYS];
         let mut tfar = [0.0f32; STREAM_RAYS];
         let mut active = 0u32;
         // Rays walked alone and found occluded.
@@ -84,7 +102,7 @@ impl Bvh {
             }
             let ray = ray.clamped_to_zero();
             if octant_of(&ray) != octant {
-                if self.trace1_with::<true, false, K, CONS>(&ray, stack).is_some() {
+                if self.trace1_with::<true, false, K, CONS, L>(&ray, stack).is_some() {
                     alone |= 1 << i;
                 }
                 continue;
@@ -120,9 +138,11 @@ impl Bvh {
             }
             while !is_leaf(cur) {
                 let b = &self.nodes[cur as usize].bounds;
-                let rows = |r: [usize; 3]| [Nf::new(b[r[0]]), Nf::new(b[r[1]]), Nf::new(b[r[2]])];
+                let rows = |r: [usize; 3]| [L::Nf::new(b[r[0]]), L::Nf::new(b[r[1]]), L::Nf::new(b[r[2]])];
                 let (bn, bf) = (rows(near), rows(far));
-                let mut hits = Ni::splat(0);
+                // Bit `i` of a child's lane: ray `i` enters it (float bit operations only: the
+                // lanes compared as floats would be denormals, zero under DAZ).
+                let mut hits = L::Nf::splat(0.0);
                 let mut bits = mask;
                 while bits != 0 {
                     let i = bits.trailing_zeros() as usize;
@@ -132,7 +152,7 @@ impl Bvh {
                     // instead of folding the widening into six more terms as `BoxRay` does: the
                     // same bound, as the widening is increasing, at one fused multiply-add for
                     // six fewer loads.
-                    let s = Nf::splat;
+                    let s = L::Nf::splat;
                     let (r0, r1, r2) = (s(sr.rd[0][i]), s(sr.rd[1][i]), s(sr.rd[2][i]));
                     let (o0, o1, o2) = (s(sr.od[0][i]), s(sr.od[1][i]), s(sr.od[2][i]));
                     let n0 = bn[0].mul_sub(r0, o0);
@@ -142,11 +162,10 @@ impl Bvh {
                     let f = if CONS { f.mul_add(s(FAR_WIDEN), s(sr.pad[i])) } else { f };
                     let tn = n0.fast_max(n1).fast_max(n2.fast_max(s(sr.tnear[i])));
                     let tf = f.fast_min(s(sr.tfar_box[i]));
-                    let entered: Ni = bytemuck::cast(tn.simd_le(tf));
-                    hits |= entered & Ni::splat(1 << i);
+                    hits |= tn.simd_le(tf) & s(f32::from_bits(1 << i));
                 }
-                let lanes = hits.to_array();
-                let mut entered = !hits.simd_eq(Ni::splat(0)).to_bitmask() & crate::simd::low_bits(WIDTH);
+                let lanes = hits.to_array().map(f32::to_bits);
+                let mut entered = (0..WIDTH).fold(0u32, |m, c| m | ((lanes[c] != 0) as u32) << c);
                 if entered == 0 {
                     continue 'pop;
                 }
@@ -159,10 +178,10 @@ impl Bvh {
                     let c = entered.trailing_zeros() as usize;
                     entered &= entered - 1;
                     self.prefetch_child(child[c]);
-                    stack.put_mask(&mut sp, child[c], lanes[c] as u32);
+                    stack.put_mask(&mut sp, child[c], lanes[c]);
                 }
                 cur = child[last];
-                mask = lanes[last] as u32;
+                mask = lanes[last];
             }
             let (start, count) = leaf_blocks(cur);
             let mut bits = mask;

@@ -128,33 +128,47 @@ impl<'a> PacketHits<'a> {
     /// to world space by `normal_to_world` (the arithmetic of glam's `Mat3A * Vec3A`, so that
     /// packets and single rays give the same normals), instance id `inst_id`.
     #[inline(always)]
-    pub fn take_instanced(&mut self, valid: Pf, from: &HitPacket, normal_to_world: &Mat3A, inst_id: u32) {
+    pub fn take_instanced<L: Level>(&mut self, valid: L::Pf, from: &HitPacket, normal_to_world: &Mat3A, inst_id: u32) {
         let h = &mut *self.hit;
-        sel(&mut h.t, valid, Pf::new(from.t));
-        sel(&mut h.u, valid, Pf::new(from.u));
-        sel(&mut h.v, valid, Pf::new(from.v));
-        let n = [Pf::new(from.ng_x), Pf::new(from.ng_y), Pf::new(from.ng_z)];
+        sel(&mut h.t, valid, L::Pf::new(from.t));
+        sel(&mut h.u, valid, L::Pf::new(from.u));
+        sel(&mut h.v, valid, L::Pf::new(from.v));
+        let n = [L::Pf::new(from.ng_x), L::Pf::new(from.ng_y), L::Pf::new(from.ng_z)];
         let (x, y, z) = (normal_to_world.x_axis, normal_to_world.y_axis, normal_to_world.z_axis);
-        let row = |a: f32, b: f32, c: f32| Pf::splat(a) * n[0] + Pf::splat(b) * n[1] + Pf::splat(c) * n[2];
+        let row = |a: f32, b: f32, c: f32| L::Pf::splat(a) * n[0] + L::Pf::splat(b) * n[1] + L::Pf::splat(c) * n[2];
         sel(&mut h.ng_x, valid, row(x.x, y.x, z.x));
         sel(&mut h.ng_y, valid, row(x.y, y.y, z.y));
         sel(&mut h.ng_z, valid, row(x.z, y.z, z.z));
-        sel_ids(&mut h.prim_id, valid, bytemuck::cast(from.prim_id));
-        sel_ids(&mut h.geom_id, valid, bytemuck::cast(from.geom_id));
+        sel_ids(&mut h.prim_id, valid, L::Pf::new(from.prim_id.map(f32::from_bits)));
+        sel_ids(&mut h.geom_id, valid, L::Pf::new(from.geom_id.map(f32::from_bits)));
         sel_id(&mut h.inst_id, valid, inst_id);
     }
 
     /// Writes the hit of triangle `lane` of block `b` into the lanes of `valid`.
     #[inline(always)]
-    fn select(&mut self, valid: Pf, b: &TriBlock, test: TriangleTest, lane: usize, tuv: (Pf, Pf, Pf)) {
+    fn select<L: Level>(
+        &mut self,
+        valid: L::Pf,
+        b: &TriBlock,
+        test: TriangleTest,
+        lane: usize,
+        tuv: (L::Pf, L::Pf, L::Pf),
+    ) {
         let ng = b.ng(test, lane);
-        let ng = [Pf::splat(ng.x), Pf::splat(ng.y), Pf::splat(ng.z)];
-        self.select_hit(valid, tuv, ng, b.prim[lane], b.geom_id(test, lane));
+        let ng = [L::Pf::splat(ng.x), L::Pf::splat(ng.y), L::Pf::splat(ng.z)];
+        self.select_hit::<L>(valid, tuv, ng, b.prim[lane], b.geom_id(test, lane));
     }
 
     /// Writes a hit on primitive `prim` of geometry `geom` into the lanes of `valid`.
     #[inline(always)]
-    pub fn select_hit(&mut self, valid: Pf, (t, u, v): (Pf, Pf, Pf), ng: [Pf; 3], prim: u32, geom: u32) {
+    pub fn select_hit<L: Level>(
+        &mut self,
+        valid: L::Pf,
+        (t, u, v): (L::Pf, L::Pf, L::Pf),
+        ng: [L::Pf; 3],
+        prim: u32,
+        geom: u32,
+    ) {
         let h = &mut *self.hit;
         sel(&mut h.t, valid, t);
         sel(&mut h.u, valid, u);
@@ -169,21 +183,21 @@ impl<'a> PacketHits<'a> {
 
 /// Writes `x` into the lanes of `valid`.
 #[inline(always)]
-fn sel(dst: &mut [f32; PACKET_WIDTH], valid: Pf, x: Pf) {
-    *dst = valid.select(x, Pf::new(*dst)).to_array();
+fn sel<V: Packet>(dst: &mut [f32; PACKET_WIDTH], valid: V, x: V) {
+    *dst = valid.select(x, V::new(*dst)).to_array();
 }
 
 /// Writes the ids `ids` (as float bits) into the lanes of `valid`.
 #[inline(always)]
-fn sel_ids(dst: &mut [u32; PACKET_WIDTH], valid: Pf, ids: Pf) {
-    let old: Pf = bytemuck::cast(*dst);
-    *dst = bytemuck::cast(valid.select(ids, old));
+fn sel_ids<V: Packet>(dst: &mut [u32; PACKET_WIDTH], valid: V, ids: V) {
+    let old = V::new(dst.map(f32::from_bits));
+    *dst = valid.select(ids, old).to_array().map(f32::to_bits);
 }
 
 /// Writes the id `id` into the lanes of `valid`.
 #[inline(always)]
-fn sel_id(dst: &mut [u32; PACKET_WIDTH], valid: Pf, id: u32) {
-    sel_ids(dst, valid, Pf::splat(f32::from_bits(id)));
+fn sel_id<V: Packet>(dst: &mut [u32; PACKET_WIDTH], valid: V, id: u32) {
+    sel_ids(dst, valid, V::splat(f32::from_bits(id)));
 }
 
 /// Fixed-size traversal stack; no kernel allocates. Each thread keeps one (see [`with_stack`]):
@@ -256,7 +270,7 @@ impl Stack {
     /// [`put_lanes`](Self::put_lanes) with each lane's entry distance (`+inf` where it did not
     /// enter).
     #[inline(always)]
-    fn put_lane_dist(&mut self, sp: &mut usize, node: u32, dist: f32, lanes: u32, tn: Pf) {
+    fn put_lane_dist<V: Packet>(&mut self, sp: &mut usize, node: u32, dist: f32, lanes: u32, tn: V) {
         self.lane_dist[*sp & (STACK - 1)].0 = tn.to_array();
         self.put_lanes(sp, node, dist, lanes);
     }
@@ -264,8 +278,8 @@ impl Stack {
     /// The per-lane entry distances of the entry below `sp` (see
     /// [`put_lane_dist`](Self::put_lane_dist)).
     #[inline(always)]
-    fn lane_dist_at(&self, sp: usize) -> Pf {
-        Pf::new(self.lane_dist[sp & (STACK - 1)].0)
+    fn lane_dist_at<V: Packet>(&self, sp: usize) -> V {
+        V::new(self.lane_dist[sp & (STACK - 1)].0)
     }
 
     /// Pushes `node` with a mask of stream rays (an occlusion stream's entry; see
@@ -372,12 +386,12 @@ pub(crate) use dispatch;
 /// sorting network in registers was faster for single-ray diffuse streams but slower for the
 /// single-ray API; it went when incoherent streams became octant-sorted packets (PERFORMANCE.md).
 #[inline(always)]
-pub(super) fn order_children<const ANY: bool>(
+pub(super) fn order_children<const ANY: bool, V: SimdF<Arr = [f32; WIDTH]>>(
     stack: &mut Stack,
     sp: &mut usize,
     child: &[u32; WIDTH],
     mut mask: u32,
-    d: Nf,
+    d: V,
 ) -> u32 {
     let i0 = mask.trailing_zeros() as usize;
     let rest = mask & mask.wrapping_sub(1);
@@ -422,17 +436,17 @@ pub(super) fn order_children<const ANY: bool>(
 /// at once, 8 wide, with interval arithmetic: the lowest entry and highest exit any ray can have
 /// (Embree's coherent packet traversal with a frustum, `node_intersector_frustum.h`; Reshetov et
 /// al., "Multi-Level Ray Tracing Algorithm", SIGGRAPH 2005).
-#[derive(Clone, Default)]
-pub(crate) struct Frustum {
+#[derive(Clone, Copy)]
+pub(crate) struct Frustum<L: Level> {
     near: [usize; 3],
     far: [usize; 3],
     /// The shared origin, per axis.
-    o: [Nf; 3],
-    rmin: [Nf; 3],
-    rmax: [Nf; 3],
-    tnear: Nf,
+    o: [L::Nf; 3],
+    rmin: [L::Nf; 3],
+    rmax: [L::Nf; 3],
+    tnear: L::Nf,
     /// How far apart the rays get per unit of `t`: the largest spread of any direction component.
-    spread: Nf,
+    spread: L::Nf,
     /// Whether the packet's `tnear` is non-negative: integer minima and maxima (see [`BitOrder`]).
     int_ok: bool,
     /// The conservative test's absolute widening: `w · max |o · r|` over the axes. `(b − o)·r`
@@ -448,12 +462,29 @@ pub(crate) struct Frustum {
 /// nodes where per-lane tests visited 5 million.
 const LANE_MODE: u32 = 1 << 30;
 
-impl Frustum {
+impl<L: Level> Default for Frustum<L> {
+    fn default() -> Self {
+        let z = L::Nf::splat(0.0);
+        Frustum {
+            near: [0; 3],
+            far: [0; 3],
+            o: [z; 3],
+            rmin: [z; 3],
+            rmax: [z; 3],
+            tnear: z,
+            spread: z,
+            int_ok: false,
+            pad: 0.0,
+        }
+    }
+}
+
+impl<L: Level> Frustum<L> {
     /// `None` unless the live lanes share one origin and one direction octant (camera packets).
     /// `tnear` holds `+inf` in the lanes out of the query; `live_mask` selects the live lanes.
-    fn new(o: &[Pf; 3], rdir: &[Pf; 3], tnear: Pf, live: u32, live_mask: Pf) -> Option<Self> {
-        let zero = Pf::splat(0.0);
-        let inf = Pf::splat(f32::INFINITY);
+    fn new(o: &[L::Pf; 3], rdir: &[L::Pf; 3], tnear: L::Pf, live: u32, live_mask: L::Pf) -> Option<Self> {
+        let zero = L::Pf::splat(0.0);
+        let inf = L::Pf::splat(f32::INFINITY);
         // The cheap rejections first (shadow packets fail on the first axis): one octant, one
         // origin.
         let first = live.trailing_zeros() as usize;
@@ -465,18 +496,18 @@ impl Frustum {
             // Packets from many origins (shadow rays from hit points) make loose frustums:
             // measured on Sponza, shadow packets ran at 28.6 Mrays/s with the frustum and 70.5
             // without. One comparison against the first live lane replaces two reductions.
-            if o[a].simd_eq(Pf::splat(o[a].to_array()[first])).to_bitmask() & live != live {
+            if o[a].simd_eq(L::Pf::splat(o[a].to_array()[first])).to_bitmask() & live != live {
                 return None;
             }
         }
-        let mut f = Frustum {
+        let mut f = Self {
             near: [0; 3],
             far: [0; 3],
-            o: [Nf::splat(0.0); 3],
-            rmin: [Nf::splat(0.0); 3],
-            rmax: [Nf::splat(0.0); 3],
-            tnear: Nf::splat(hmin(tnear)),
-            spread: Nf::splat(0.0),
+            o: [L::Nf::splat(0.0); 3],
+            rmin: [L::Nf::splat(0.0); 3],
+            rmax: [L::Nf::splat(0.0); 3],
+            tnear: L::Nf::splat(tnear.hmin()),
+            spread: L::Nf::splat(0.0),
             int_ok: false,
             pad: 0.0,
         };
@@ -484,31 +515,31 @@ impl Frustum {
         let t0 = f.tnear.to_array()[0];
         f.int_ok = t0 >= 0.0;
         if f.int_ok {
-            f.tnear = Nf::splat(t0 + 0.0);
+            f.tnear = L::Nf::splat(t0 + 0.0);
         }
         let mut spread = 0.0f32;
         for a in 0..3 {
             let negative = rdir[a].simd_lt(zero).to_bitmask() & live != 0;
             let o0 = o[a].to_array()[first];
-            let rmin = hmin(live_mask.select(rdir[a], inf));
-            let rmax = -hmin(live_mask.select(-rdir[a], inf));
+            let rmin = live_mask.select(rdir[a], inf).hmin();
+            let rmax = -live_mask.select(-rdir[a], inf).hmin();
             // One octant: the directions span [1/rmax, 1/rmin] on this axis.
             spread = spread.max((1.0 / rmin - 1.0 / rmax).abs());
             // Near plane: the box minimum for positive directions, mirrored for negative ones.
             f.near[a] = 2 * a + negative as usize;
             f.far[a] = 2 * a + 1 - negative as usize;
-            f.o[a] = Nf::splat(o0);
-            f.rmin[a] = Nf::splat(rmin);
-            f.rmax[a] = Nf::splat(rmax);
+            f.o[a] = L::Nf::splat(o0);
+            f.rmin[a] = L::Nf::splat(rmin);
+            f.rmax[a] = L::Nf::splat(rmax);
         }
-        f.spread = Nf::splat(spread * FOOTPRINT_FACTOR);
+        f.spread = L::Nf::splat(spread * FOOTPRINT_FACTOR);
         f.pad = Self::pad_of(&f.o, &f.rmin, &f.rmax);
         Some(f)
     }
 
     /// [`pad`](Self::pad) for origin `o` and reciprocal ranges `rmin..rmax` (finite: the
     /// reciprocals are clamped, and a saturated product stays below `f32::MAX`).
-    fn pad_of(o: &[Nf; 3], rmin: &[Nf; 3], rmax: &[Nf; 3]) -> f32 {
+    fn pad_of(o: &[L::Nf; 3], rmin: &[L::Nf; 3], rmax: &[L::Nf; 3]) -> f32 {
         (0..3)
             .map(|a| {
                 let o = o[a].to_array()[0].abs();
@@ -527,11 +558,11 @@ impl Frustum {
 
     /// [`test`](Self::test) with the mask as a select mask and the distances as a vector.
     #[inline(always)]
-    pub(super) fn test_vec<const CONS: bool>(&self, b: &[[f32; WIDTH]; 6], tfar_max: f32) -> (Nf, Nf) {
-        let pn = |a: usize| Nf::new(b[self.near[a]]) - self.o[a];
-        let pf = |a: usize| Nf::new(b[self.far[a]]) - self.o[a];
+    pub(super) fn test_vec<const CONS: bool>(&self, b: &[[f32; WIDTH]; 6], tfar_max: f32) -> (L::Nf, L::Nf) {
+        let pn = |a: usize| L::Nf::new(b[self.near[a]]) - self.o[a];
+        let pf = |a: usize| L::Nf::new(b[self.far[a]]) - self.o[a];
         let (pn, pf) = ([pn(0), pn(1), pn(2)], [pf(0), pf(1), pf(2)]);
-        let tfar = Nf::splat(tfar_max);
+        let tfar = L::Nf::splat(tfar_max);
         // Exit distances stay float. A product `+0 · r` with `r < 0` is `-0.0`, the smallest value
         // as bits: an integer minimum would return it over the true (negative) exit, and every box
         // with a plane through the packet's origin would be entered (Sibenik's camera sits on such
@@ -547,18 +578,18 @@ impl Frustum {
             n(0).fast_max(n(1)).fast_max(n(2).fast_max(self.tnear))
         };
         // Widen by the rounding of the subtraction and product (relative), as in the per-ray test.
-        let tf = if CONS { tf + (tn.abs() + tf.abs()) * Nf::splat(WIDEN) + Nf::splat(self.pad) } else { tf };
+        let tf = if CONS { tf + (tn.abs() + tf.abs()) * L::Nf::splat(WIDEN) + L::Nf::splat(self.pad) } else { tf };
         let mask = if self.int_ok { tn.le_mask(tf) } else { tn.simd_le(tf) };
         (mask, tn)
     }
 
     /// The frustum bounding both `self` and `other`, if they share the origin and octant.
-    pub(crate) fn merge(&self, other: &Frustum) -> Option<Frustum> {
+    pub(crate) fn merge(&self, other: &Self) -> Option<Self> {
         if self.near != other.near {
             return None;
         }
         let mut spread = 0.0f32;
-        let mut f = Frustum {
+        let mut f = Self {
             near: self.near,
             far: self.far,
             o: self.o,
@@ -578,7 +609,7 @@ impl Frustum {
             let (rmin, rmax) = (f.rmin[a].to_array()[0], f.rmax[a].to_array()[0]);
             spread = spread.max((1.0 / rmin - 1.0 / rmax).abs());
         }
-        f.spread = Nf::splat(spread * FOOTPRINT_FACTOR);
+        f.spread = L::Nf::splat(spread * FOOTPRINT_FACTOR);
         f.pad = Self::pad_of(&f.o, &f.rmin, &f.rmax);
         Some(f)
     }
@@ -587,9 +618,9 @@ impl Frustum {
     /// distance `d`.
     #[inline(always)]
     pub(super) fn small(&self, b: &[[f32; WIDTH]; 6], d: &[f32; WIDTH]) -> u32 {
-        let ext = |a: usize| Nf::new(b[2 * a + 1]) - Nf::new(b[2 * a]);
+        let ext = |a: usize| L::Nf::new(b[2 * a + 1]) - L::Nf::new(b[2 * a]);
         let e = ext(0).fast_max(ext(1)).fast_max(ext(2));
-        e.simd_lt(Nf::new(*d).abs() * self.spread).to_bitmask()
+        e.simd_lt(L::Nf::new(*d).abs() * self.spread).to_bitmask()
     }
 }
 
@@ -629,7 +660,7 @@ impl Bvh {
             return None;
         }
         let ray = &ray.clamped_to_zero();
-        let r4 = Ray4::new(ray.origin, ray.dir);
+        let r4 = Ray4::<Native>::new(ray.origin, ray.dir);
         let pre = K::pre(&r4);
         let mut tfar = ray.tfar;
         let mut best = None;
@@ -648,14 +679,18 @@ impl Bvh {
         if self.root == EMPTY {
             return None;
         }
-        with_stack(|stack| dispatch!(self.test, self.box_test, |K, C| self.trace1_with::<ANY, true, K, C>(ray, stack)))
+        with_stack(|stack| {
+            dispatch!(self.test, self.box_test, |K, C| with_level!(
+                |L| self.trace1_with::<ANY, true, K, C, L>(ray, stack)
+            ))
+        })
     }
 
     /// [`trace1`](Self::trace1) with a chosen kernel, on `stack` above its current entries. With
     /// `CHECK` (the single-ray API) an invalid ray misses; without (an instance's object walk,
     /// a stream's lone ray), the caller has checked the ray.
     #[inline(never)]
-    pub(crate) fn trace1_with<const ANY: bool, const CHECK: bool, K: Kernel, const CONS: bool>(
+    pub(crate) fn trace1_with<const ANY: bool, const CHECK: bool, K: Kernel, const CONS: bool, L: Level>(
         &self,
         ray: &Ray,
         stack: &mut Stack,
@@ -663,29 +698,34 @@ impl Bvh {
         // The walk's own copy, read field by field: this call's callers (the single-ray API, an
         // instance's object walk) have just written the ray (see `Ray::read_fields`). The API's
         // validity check reads the same copy.
-        let ray = ray.read_fields();
-        if CHECK && !ray.is_valid() {
-            return None;
-        }
-        self.trace1_from::<ANY, K, CONS>(&ray.clamped_to_zero(), self.root, stack)
+        L::call(
+            #[inline(always)]
+            || {
+                let ray = ray.read_fields();
+                if CHECK && !ray.is_valid() {
+                    return None;
+                }
+                self.trace1_from::<ANY, K, CONS, L>(&ray.clamped_to_zero(), self.root, stack)
+            },
+        )
     }
 
     /// [`trace1_with`](Self::trace1_with) over the subtree at `root` (a node or a leaf): the
     /// whole tree, or the part a packet hands to its few lanes that enter it.
     #[inline(always)]
-    pub(crate) fn trace1_from<const ANY: bool, K: Kernel, const CONS: bool>(
+    pub(crate) fn trace1_from<const ANY: bool, K: Kernel, const CONS: bool, L: Level>(
         &self,
         ray: &Ray,
         root: u32,
         stack: &mut Stack,
     ) -> Option<LeafHit> {
-        self.trace1_from_terms::<ANY, K, CONS>(ray, SlabTerms::of(ray), root, stack)
+        self.trace1_from_terms::<ANY, K, CONS, L>(ray, SlabTerms::of(ray), root, stack)
     }
 
     /// [`trace1_from`](Self::trace1_from) with the ray's slab terms already computed (a packet's
     /// lane, see [`LaneSlabs`]).
     #[inline(always)]
-    pub(crate) fn trace1_from_terms<const ANY: bool, K: Kernel, const CONS: bool>(
+    pub(crate) fn trace1_from_terms<const ANY: bool, K: Kernel, const CONS: bool, L: Level>(
         &self,
         ray: &Ray,
         terms: SlabTerms,
@@ -696,24 +736,32 @@ impl Bvh {
             return None;
         }
         let base = stack.push_root(root);
-        let r4 = Ray4::new(ray.origin, ray.dir);
+        let r4 = Ray4::<L>::new(ray.origin, ray.dir);
         let pre = K::pre(&r4);
-        let br = BoxRay::with_terms(terms, ray.tnear);
+        let br = BoxRay::<L>::with_terms(terms, ray.tnear);
         let mut tfar = ray.tfar;
         let mut best = None;
-        walk1::<ANY, CONS>(self.tree(), &br, stack, base, &mut tfar, |leaf, tfar, _| {
-            let (start, count) = leaf_blocks(leaf);
-            for bi in start..start + count {
-                if let Some((lane, t, u, v)) = K::intersect1(&self.blocks[bi], &r4, &pre, ray.tnear, *tfar) {
-                    *tfar = t;
-                    best = Some(LeafHit { block: bi as u32, lane: lane as u32, t, u, v });
-                    if ANY {
-                        return true;
+        walk1::<ANY, CONS, L>(
+            self.tree(),
+            &br,
+            stack,
+            base,
+            &mut tfar,
+            #[inline(always)]
+            |leaf, tfar, _| {
+                let (start, count) = leaf_blocks(leaf);
+                for bi in start..start + count {
+                    if let Some((lane, t, u, v)) = K::intersect1(&self.blocks[bi], &r4, &pre, ray.tnear, *tfar) {
+                        *tfar = t;
+                        best = Some(LeafHit { block: bi as u32, lane: lane as u32, t, u, v });
+                        if ANY {
+                            return true;
+                        }
                     }
                 }
-            }
-            false
-        });
+                false
+            },
+        );
         best
     }
 
@@ -723,29 +771,36 @@ impl Bvh {
     /// occluded).
     pub fn trace_packet<const ANY: bool>(&self, p: &RayPacket, hit: &mut HitPacket) -> u32 {
         with_stack(|stack| {
-            dispatch!(self.test, self.box_test, |K, C| self.trace_packet_with::<ANY, K, C>(p, hit, stack))
+            dispatch!(self.test, self.box_test, |K, C| with_level!(
+                |L| self.trace_packet_with::<ANY, K, C, L>(p, hit, stack)
+            ))
         })
     }
 
     /// [`trace_packet`](Self::trace_packet) with a chosen kernel, on `stack` above its current
     /// entries.
     #[inline(never)]
-    pub(crate) fn trace_packet_with<const ANY: bool, K: Kernel, const CONS: bool>(
+    pub(crate) fn trace_packet_with<const ANY: bool, K: Kernel, const CONS: bool, L: Level>(
         &self,
         p: &RayPacket,
         hit: &mut HitPacket,
         stack: &mut Stack,
     ) -> u32 {
-        let mut out = PacketHits::new(hit);
-        self.trace_packet_from::<ANY, K, CONS>(p, self.root, &mut out, stack);
-        out.mask
+        L::call(
+            #[inline(always)]
+            || {
+                let mut out = PacketHits::new(hit);
+                self.trace_packet_from::<ANY, K, CONS, L>(p, self.root, &mut out, stack);
+                out.mask
+            },
+        )
     }
 
     /// [`trace_packet_with`](Self::trace_packet_with) over the subtree at `root` (a node or a
     /// leaf), recording in `out` the hits closer than the lanes' `tfar`: the whole tree, or the
     /// part a coherent group hands to one packet.
     #[inline(always)]
-    pub(crate) fn trace_packet_from<const ANY: bool, K: Kernel, const CONS: bool>(
+    pub(crate) fn trace_packet_from<const ANY: bool, K: Kernel, const CONS: bool, L: Level>(
         &self,
         p: &RayPacket,
         root: u32,
@@ -755,41 +810,50 @@ impl Bvh {
         if root == EMPTY {
             return;
         }
-        let Some((pb, mut tfar)) = PacketBoxes::new(p) else {
+        let Some((pb, mut tfar)) = PacketBoxes::<L>::new(p) else {
             return;
         };
         let base = stack.push_root(root);
-        let rk = RayK { o: pb.o, d: pb.d, tnear: pb.tnear };
-        walk_packet::<ANY, CONS>(self.tree(), &pb, stack, base, &mut tfar, |leaf, lanes, tfar, stack| {
-            if lanes != 0 {
-                // A few lanes walk this subtree one at a time.
-                out.mask |= each_lane_alone::<ANY, _>(
-                    p,
-                    lanes,
-                    tfar,
-                    |l, ray| {
-                        let h = self.trace1_from_terms::<ANY, K, CONS>(ray, pb.slabs.lane(l), leaf, stack)?;
-                        Some((h.t, h))
-                    },
-                    |l, h| out.set(l, &self.hit_record(&h)),
-                );
-                return ANY && out.mask == pb.live;
-            }
-            self.leaf_packet::<ANY, K>(leaf, &rk, pb.tnear, pb.live, tfar, out)
-        });
+        let rk = RayK::<L> { o: pb.o, d: pb.d, tnear: pb.tnear };
+        walk_packet::<ANY, CONS, L>(
+            self.tree(),
+            &pb,
+            stack,
+            base,
+            &mut tfar,
+            #[inline(always)]
+            |leaf, lanes, tfar, stack| {
+                if lanes != 0 {
+                    // A few lanes walk this subtree one at a time.
+                    out.mask |= each_lane_alone::<ANY, _, L>(
+                        p,
+                        lanes,
+                        tfar,
+                        #[inline(always)]
+                        |l, ray| {
+                            let h = self.trace1_from_terms::<ANY, K, CONS, L>(ray, pb.slabs.lane(l), leaf, stack)?;
+                            Some((h.t, h))
+                        },
+                        |l, h| out.set(l, &self.hit_record(&h)),
+                    );
+                    return ANY && out.mask == pb.live;
+                }
+                self.leaf_packet::<ANY, K, L>(leaf, &rk, pb.tnear, pb.live, tfar, out)
+            },
+        );
     }
 
     /// Tests the blocks of `leaf` against the open lanes of a packet (`tnear ≤ tfar`): lowers the
     /// lanes' `tfar` to their hits (closes them, `ANY`) and records the hits in `out`. Returns
     /// true once every `live` lane is occluded (`ANY`).
     #[inline(always)]
-    pub(super) fn leaf_packet<const ANY: bool, K: Kernel>(
+    pub(super) fn leaf_packet<const ANY: bool, K: Kernel, L: Level>(
         &self,
         leaf: u32,
-        rk: &RayK,
-        tnear: Pf,
+        rk: &RayK<L>,
+        tnear: L::Pf,
         live: u32,
-        tfar: &mut Pf,
+        tfar: &mut L::Pf,
         out: &mut PacketHits<'_>,
     ) -> bool {
         let (start, count) = leaf_blocks(leaf);
@@ -808,7 +872,7 @@ impl Bvh {
                 if ANY {
                     // Occluded lanes are finished: close their interval.
                     out.mask |= bits;
-                    *tfar = valid.select(Pf::splat(f32::NEG_INFINITY), *tfar);
+                    *tfar = valid.select(L::Pf::splat(f32::NEG_INFINITY), *tfar);
                     if out.mask == live {
                         return true;
                     }
@@ -816,7 +880,7 @@ impl Bvh {
                 }
                 *tfar = valid.select(t, *tfar);
                 out.mask |= bits;
-                out.select(valid, blk, self.test, lane, (t, u, v));
+                out.select::<L>(valid, blk, self.test, lane, (t, u, v));
             }
         }
         false
@@ -824,18 +888,18 @@ impl Bvh {
 }
 
 /// One ray's slab-test terms, for the 8 children of a node at a time.
-pub(crate) struct BoxRay {
-    rd: [Nf; 3],
-    od: [Nf; 3],
+pub(crate) struct BoxRay<L: Level> {
+    rd: [L::Nf; 3],
+    od: [L::Nf; 3],
     /// The far planes' terms: for the conservative test, `rd·(1 + w)` and `od·(1 + w) − pad`, so
     /// that `fmsub(box, rdf, odf)` is the widened far distance `(box·rd − od)·(1 + w) + pad`
     /// without a multiply-add after the minimum (the same bound, one step shorter).
-    rdf: [Nf; 3],
-    odf: [Nf; 3],
+    rdf: [L::Nf; 3],
+    odf: [L::Nf; 3],
     /// Row of the near plane per axis: the box minimum where the direction is positive.
     near: [usize; 3],
     far: [usize; 3],
-    tnear: Nf,
+    tnear: L::Nf,
     /// The conservative test's pad for the ray's own `tfar` (widened by [`FAR_WIDEN`]).
     far_pad: f32,
     /// Whether `tnear ≥ 0`: then the minima and maxima run as integer operations (see
@@ -879,7 +943,7 @@ impl SlabTerms {
     }
 }
 
-impl BoxRay {
+impl<L: Level> BoxRay<L> {
     /// The node-test form of a ray's slab terms, for the interval from `tnear`.
     #[inline(always)]
     pub(crate) fn with_terms(terms: SlabTerms, tnear: f32) -> Self {
@@ -889,13 +953,13 @@ impl BoxRay {
         let int_ok = tnear >= 0.0;
         let tnear = if int_ok { tnear + 0.0 } else { tnear };
         Self {
-            rd: [Nf::splat(rdir.x), Nf::splat(rdir.y), Nf::splat(rdir.z)],
-            od: [Nf::splat(ordir.x), Nf::splat(ordir.y), Nf::splat(ordir.z)],
-            rdf: [Nf::splat(rdf.x), Nf::splat(rdf.y), Nf::splat(rdf.z)],
-            odf: [Nf::splat(odf.x), Nf::splat(odf.y), Nf::splat(odf.z)],
+            rd: [L::Nf::splat(rdir.x), L::Nf::splat(rdir.y), L::Nf::splat(rdir.z)],
+            od: [L::Nf::splat(ordir.x), L::Nf::splat(ordir.y), L::Nf::splat(ordir.z)],
+            rdf: [L::Nf::splat(rdf.x), L::Nf::splat(rdf.y), L::Nf::splat(rdf.z)],
+            odf: [L::Nf::splat(odf.x), L::Nf::splat(odf.y), L::Nf::splat(odf.z)],
             near,
             far: [near[0] ^ 1, near[1] ^ 1, near[2] ^ 1],
-            tnear: Nf::splat(tnear),
+            tnear: L::Nf::splat(tnear),
             far_pad: pad,
             int_ok,
         }
@@ -912,16 +976,16 @@ impl BoxRay {
 
     /// The children of `node` the ray enters before `tfar`, and the entry distance of each.
     #[inline(always)]
-    fn test<const CONS: bool>(&self, node: &Node, tfar: f32) -> (u32, Nf) {
+    fn test<const CONS: bool>(&self, node: &Node, tfar: f32) -> (u32, L::Nf) {
         let b = &node.bounds;
-        let near = |a: usize| Nf::new(b[self.near[a]]).mul_sub(self.rd[a], self.od[a]);
+        let near = |a: usize| L::Nf::new(b[self.near[a]]).mul_sub(self.rd[a], self.od[a]);
         let (n0, n1, n2) = (near(0), near(1), near(2));
         let (f0, f1, f2, tf) = if CONS {
-            let far = |a: usize| Nf::new(b[self.far[a]]).mul_sub(self.rdf[a], self.odf[a]);
-            (far(0), far(1), far(2), Nf::splat(self.pop_limit::<CONS>(tfar)))
+            let far = |a: usize| L::Nf::new(b[self.far[a]]).mul_sub(self.rdf[a], self.odf[a]);
+            (far(0), far(1), far(2), L::Nf::splat(self.pop_limit::<CONS>(tfar)))
         } else {
-            let far = |a: usize| Nf::new(b[self.far[a]]).mul_sub(self.rd[a], self.od[a]);
-            (far(0), far(1), far(2), Nf::splat(tfar))
+            let far = |a: usize| L::Nf::new(b[self.far[a]]).mul_sub(self.rd[a], self.od[a]);
+            (far(0), far(1), far(2), L::Nf::splat(tfar))
         };
         if self.int_ok {
             // Integer minima and maxima: exact here because `tnear ≥ +0` enters the maximum.
@@ -960,9 +1024,9 @@ impl Bvh {
 /// `leaf(reference, tfar)` tests one leaf, may lower `tfar`, and returns true to end the walk (an
 /// any-hit query found its hit). Shared by triangle BVHs and the instance level above them.
 #[inline(always)]
-pub(crate) fn walk1<const ANY: bool, const CONS: bool>(
+pub(crate) fn walk1<const ANY: bool, const CONS: bool, L: Level>(
     tree: Tree<'_>,
-    br: &BoxRay,
+    br: &BoxRay<L>,
     stack: &mut Stack,
     base: usize,
     tfar: &mut f32,
@@ -994,7 +1058,7 @@ pub(crate) fn walk1<const ANY: bool, const CONS: bool>(
             if far_memory {
                 prefetch_children(nodes, blocks, &node.child, mask);
             }
-            cur = order_children::<ANY>(stack, &mut sp, &node.child, mask, tn);
+            cur = order_children::<ANY, _>(stack, &mut sp, &node.child, mask, tn);
         }
     }
     stack.len = base;
@@ -1020,52 +1084,52 @@ fn prefetch_children(nodes: &[Node], blocks: &[TriBlock], child: &[u32; WIDTH], 
 }
 
 /// A packet's slab-test terms: per-lane reciprocals, and the frustum if the packet has one.
-pub(crate) struct PacketBoxes {
-    pub o: [Pf; 3],
-    pub d: [Pf; 3],
+pub(crate) struct PacketBoxes<L: Level> {
+    pub o: [L::Pf; 3],
+    pub d: [L::Pf; 3],
     /// Every lane's slab terms, also what the lanes handed to single-ray walks start from.
-    pub slabs: LaneSlabs,
+    pub slabs: LaneSlabs<L>,
     /// Per lane; `+inf` in lanes out of the query, so no node or triangle test passes them.
-    pub tnear: Pf,
+    pub tnear: L::Pf,
     /// The active lanes with valid rays.
     pub live: u32,
     /// Whether every live lane's `tnear` is non-negative: integer minima and maxima in the per-lane
     /// tests (see [`BitOrder`]).
     int_ok: bool,
-    pub(crate) frustum: Option<Frustum>,
+    pub(crate) frustum: Option<Frustum<L>>,
 }
 
-impl PacketBoxes {
+impl<L: Level> PacketBoxes<L> {
     /// The terms and the lanes' initial `tfar` (`−inf` out of the query), or `None` if no active
     /// lane holds a valid ray.
     #[inline(always)]
-    pub fn new(p: &RayPacket) -> Option<(Self, Pf)> {
-        let o = [Pf::new(p.ox), Pf::new(p.oy), Pf::new(p.oz)];
-        let d = [Pf::new(p.dx), Pf::new(p.dy), Pf::new(p.dz)];
+    pub fn new(p: &RayPacket) -> Option<(Self, L::Pf)> {
+        let o = [L::Pf::new(p.ox), L::Pf::new(p.oy), L::Pf::new(p.oz)];
+        let d = [L::Pf::new(p.dx), L::Pf::new(p.dy), L::Pf::new(p.dz)];
         // `Ray::is_valid` for all lanes at once: comparisons with NaN are false.
-        let inf = Pf::splat(f32::INFINITY);
-        let finite = |x: Pf| x.abs().simd_lt(inf);
-        let (ad, tn, tf) = ([d[0].abs(), d[1].abs(), d[2].abs()], Pf::new(p.tnear), Pf::new(p.tfar));
+        let inf = L::Pf::splat(f32::INFINITY);
+        let finite = |x: L::Pf| x.abs().simd_lt(inf);
+        let (ad, tn, tf) = ([d[0].abs(), d[1].abs(), d[2].abs()], L::Pf::new(p.tnear), L::Pf::new(p.tfar));
         let valid = finite(o[0])
             & finite(o[1])
             & finite(o[2])
             & finite(d[0])
             & finite(d[1])
             & finite(d[2])
-            & ad[0].fast_max(ad[1]).fast_max(ad[2]).simd_ge(Pf::splat(MIN_DIRECTION))
+            & ad[0].fast_max(ad[1]).fast_max(ad[2]).simd_ge(L::Pf::splat(MIN_DIRECTION))
             & tn.simd_le(tf);
         let live = valid.to_bitmask() & p.active & ((1u64 << PACKET_WIDTH) - 1) as u32;
         if live == 0 {
             return None;
         }
         let slabs = LaneSlabs::of(&o, &d);
-        let live_mask = lane_mask(live);
+        let live_mask = L::Pf::lane_mask(live);
         // No query reaches behind a ray's origin (`Ray::clamped_to_zero`).
-        let tnear = live_mask.select(tn.fast_max(Pf::splat(0.0)), inf);
-        let tfar = live_mask.select(tf, Pf::splat(f32::NEG_INFINITY));
+        let tnear = live_mask.select(tn.fast_max(L::Pf::splat(0.0)), inf);
+        let tfar = live_mask.select(tf, L::Pf::splat(f32::NEG_INFINITY));
         // `-0.0 + 0.0` is `+0.0`; lanes out of the query hold `+inf`.
-        let int_ok = tnear.simd_ge(Pf::splat(0.0)).to_bitmask() == low_bits(PACKET_WIDTH);
-        let tnear = if int_ok { tnear + Pf::splat(0.0) } else { tnear };
+        let int_ok = tnear.simd_ge(L::Pf::splat(0.0)).to_bitmask() == low_bits(PACKET_WIDTH);
+        let tnear = if int_ok { tnear + L::Pf::splat(0.0) } else { tnear };
         let frustum = Frustum::new(&o, &slabs.rd, tnear, live, live_mask);
         Some((Self { o, d, slabs, tnear, live, int_ok, frustum }, tfar))
     }
@@ -1075,45 +1139,45 @@ impl PacketBoxes {
 /// use, and what a lane handed to a single-ray walk takes as its own ([`lane`](Self::lane)), as
 /// Embree's hybrid walk hands its lanes the packet's reciprocals, so that no lane's walk waits
 /// for three scalar divisions before its first node test.
-pub(crate) struct LaneSlabs {
-    rd: [Pf; 3],
-    od: [Pf; 3],
-    pad: Pf,
+pub(crate) struct LaneSlabs<L: Level> {
+    rd: [L::Pf; 3],
+    od: [L::Pf; 3],
+    pad: L::Pf,
 }
 
-impl LaneSlabs {
+impl<L: Level> LaneSlabs<L> {
     /// The terms of the rays with origins `o` and directions `d`, lane by lane the values
     /// [`SlabTerms::of`] computes for one ray.
     #[inline(always)]
-    pub fn of(o: &[Pf; 3], d: &[Pf; 3]) -> Self {
-        let rcp = |x: Pf| {
-            let small = x.abs().simd_lt(Pf::splat(MIN_RCP_INPUT));
-            Pf::splat(1.0) / small.select(Pf::splat(MIN_RCP_INPUT).copysign(x), x)
+    pub fn of(o: &[L::Pf; 3], d: &[L::Pf; 3]) -> Self {
+        let rcp = |x: L::Pf| {
+            let small = x.abs().simd_lt(L::Pf::splat(MIN_RCP_INPUT));
+            L::Pf::splat(1.0) / small.select(L::Pf::splat(MIN_RCP_INPUT).copysign(x), x)
         };
         let rd = [rcp(d[0]), rcp(d[1]), rcp(d[2])];
-        let sat = |x: Pf| x.fast_max(Pf::splat(-MAX_OD)).fast_min(Pf::splat(MAX_OD));
+        let sat = |x: L::Pf| x.fast_max(L::Pf::splat(-MAX_OD)).fast_min(L::Pf::splat(MAX_OD));
         let od = [sat(o[0] * rd[0]), sat(o[1] * rd[1]), sat(o[2] * rd[2])];
-        let pad = od[0].abs().fast_max(od[1].abs()).fast_max(od[2].abs()) * Pf::splat(WIDEN);
+        let pad = od[0].abs().fast_max(od[1].abs()).fast_max(od[2].abs()) * L::Pf::splat(WIDEN);
         Self { rd, od, pad }
     }
 
     /// Lane `l`'s terms.
     #[inline(always)]
     pub fn lane(&self, l: usize) -> SlabTerms {
-        let at = |v: &[Pf; 3]| Vec3::new(v[0].as_array()[l], v[1].as_array()[l], v[2].as_array()[l]);
-        SlabTerms::from_parts(at(&self.rd), at(&self.od), self.pad.as_array()[l])
+        let at = |v: &[L::Pf; 3]| Vec3::new(v[0].to_array()[l], v[1].to_array()[l], v[2].to_array()[l]);
+        SlabTerms::from_parts(at(&self.rd), at(&self.od), self.pad.to_array()[l])
     }
 }
 
-impl PacketBoxes {
+impl<L: Level> PacketBoxes<L> {
     /// The largest extent, over the three axes, of the live lanes' origins.
     #[inline(always)]
     pub fn origin_extent(&self) -> f32 {
-        let live = lane_mask(self.live);
+        let live = L::Pf::lane_mask(self.live);
         let mut e = 0.0f32;
         for o in &self.o {
-            let hi = hmax(live.select(*o, Pf::splat(f32::NEG_INFINITY)));
-            let lo = hmin(live.select(*o, Pf::splat(f32::INFINITY)));
+            let hi = live.select(*o, L::Pf::splat(f32::NEG_INFINITY)).hmax();
+            let lo = live.select(*o, L::Pf::splat(f32::INFINITY)).hmin();
             e = e.max(hi - lo);
         }
         e
@@ -1122,17 +1186,17 @@ impl PacketBoxes {
     /// The lanes that enter the box `lo..hi` before their `tfar` (the per-lane slab test, with the
     /// conservative widening if `CONS`).
     #[inline(always)]
-    pub fn lanes_in_box<const CONS: bool>(&self, lo: [f32; 3], hi: [f32; 3], tfar: Pf) -> u32 {
+    pub fn lanes_in_box<const CONS: bool>(&self, lo: [f32; 3], hi: [f32; 3], tfar: L::Pf) -> u32 {
         self.enter::<CONS>(lo, hi, tfar).0
     }
 
     /// The lanes that enter the box `lo..hi` before their `tfar`, and each lane's entry distance
     /// (`+inf` in the others).
     #[inline(always)]
-    fn enter<const CONS: bool>(&self, lo: [f32; 3], hi: [f32; 3], tfar: Pf) -> (u32, Pf) {
+    fn enter<const CONS: bool>(&self, lo: [f32; 3], hi: [f32; 3], tfar: L::Pf) -> (u32, L::Pf) {
         let slab = |a: usize| {
-            let t0 = Pf::splat(lo[a]).mul_sub(self.slabs.rd[a], self.slabs.od[a]);
-            let t1 = Pf::splat(hi[a]).mul_sub(self.slabs.rd[a], self.slabs.od[a]);
+            let t0 = L::Pf::splat(lo[a]).mul_sub(self.slabs.rd[a], self.slabs.od[a]);
+            let t1 = L::Pf::splat(hi[a]).mul_sub(self.slabs.rd[a], self.slabs.od[a]);
             (t0, t1)
         };
         let ((x0, x1), (y0, y1), (z0, z1)) = (slab(0), slab(1), slab(2));
@@ -1145,9 +1209,9 @@ impl PacketBoxes {
         } else {
             x0.fast_min(x1).fast_max(y0.fast_min(y1)).fast_max(z0.fast_min(z1).fast_max(self.tnear))
         };
-        let tf = if CONS { tf.mul_add(Pf::splat(FAR_WIDEN), self.slabs.pad) } else { tf };
+        let tf = if CONS { tf.mul_add(L::Pf::splat(FAR_WIDEN), self.slabs.pad) } else { tf };
         let mask = if self.int_ok { tn.le_mask(tf) } else { tn.simd_le(tf) };
-        (mask.to_bitmask(), mask.select(tn, Pf::splat(f32::INFINITY)))
+        (mask.to_bitmask(), mask.select(tn, L::Pf::splat(f32::INFINITY)))
     }
 }
 
@@ -1156,10 +1220,10 @@ impl PacketBoxes {
 /// `t`, and is handed to `record(lane, hit)` (closest hit only). Returns the lanes that hit. The
 /// packet walks' leaf closures use it for the subtrees they hand to single rays.
 #[inline(always)]
-pub(crate) fn each_lane_alone<const ANY: bool, H>(
+pub(crate) fn each_lane_alone<const ANY: bool, H, L: Level>(
     p: &RayPacket,
     lanes: u32,
-    tfar: &mut Pf,
+    tfar: &mut L::Pf,
     mut walk: impl FnMut(usize, &Ray) -> Option<(f32, H)>,
     mut record: impl FnMut(usize, H),
 ) -> u32 {
@@ -1178,7 +1242,7 @@ pub(crate) fn each_lane_alone<const ANY: bool, H>(
             }
         }
     }
-    *tfar = Pf::new(t);
+    *tfar = L::Pf::new(t);
     hits
 }
 
@@ -1197,24 +1261,24 @@ const SINGLE_SWITCH: u32 = 4;
 /// packet, and with the few `lanes` that entered a subtree (a node or a leaf) to walk it one ray
 /// at a time; it may lower the lanes' `tfar` and returns true to end the walk.
 #[inline(always)]
-pub(crate) fn walk_packet<const ANY: bool, const CONS: bool>(
+pub(crate) fn walk_packet<const ANY: bool, const CONS: bool, L: Level>(
     tree: Tree<'_>,
-    pb: &PacketBoxes,
+    pb: &PacketBoxes<L>,
     stack: &mut Stack,
     base: usize,
-    tfar: &mut Pf,
-    mut leaf: impl FnMut(u32, u32, &mut Pf, &mut Stack) -> bool,
+    tfar: &mut L::Pf,
+    mut leaf: impl FnMut(u32, u32, &mut L::Pf, &mut Stack) -> bool,
 ) {
     let Tree { nodes, blocks, far_memory } = tree;
-    let mut tfar_max = hmax(*tfar);
+    let mut tfar_max = tfar.hmax();
     // Popped entries are held to the node tests' own widened bounds (see `BoxRay::pop_limit`):
     // per lane `tfar·(1 + w) + pad`, and for the packet's lowest entry the largest of those (the
     // frustum test's relative widening, `(|tn| + |tf|)·w`, lies within twice that).
-    let max_pad = if CONS { hmax(pb.slabs.pad).max(pb.frustum.as_ref().map_or(0.0, |f| f.pad)) } else { 0.0 };
+    let max_pad = if CONS { pb.slabs.pad.hmax().max(pb.frustum.as_ref().map_or(0.0, |f| f.pad)) } else { 0.0 };
     let pop_limit = |tfar_max: f32, dist: f32| {
         if CONS { tfar_max + (tfar_max.abs() + dist.abs()) * (2.0 * WIDEN) + max_pad } else { tfar_max }
     };
-    let lane_limit = |tfar: Pf| if CONS { tfar.mul_add(Pf::splat(FAR_WIDEN), pb.slabs.pad) } else { tfar };
+    let lane_limit = |tfar: L::Pf| if CONS { tfar.mul_add(L::Pf::splat(FAR_WIDEN), pb.slabs.pad) } else { tfar };
     // Camera packets (with a frustum) never switch to single rays; their entries' lane masks are
     // not kept.
     let switch = pb.frustum.is_none();
@@ -1253,7 +1317,7 @@ pub(crate) fn walk_packet<const ANY: bool, const CONS: bool>(
                 if done {
                     break 'pop;
                 }
-                tfar_max = hmax(*tfar);
+                tfar_max = tfar.hmax();
                 continue 'pop;
             }
             let lane_mode = cur & LANE_MODE != 0;
@@ -1287,14 +1351,14 @@ pub(crate) fn walk_packet<const ANY: bool, const CONS: bool>(
                 if far_memory {
                     prefetch_children(nodes, blocks, &node.child, mask);
                 }
-                cur = order_children::<ANY>(stack, &mut sp, &child, mask, Nf::new(d));
+                cur = order_children::<ANY, _>(stack, &mut sp, &child, mask, L::Nf::new(d));
                 lanes = 0;
                 continue;
             }
             let mut hit_child = [0u32; WIDTH];
             let mut hit_dist = [0f32; WIDTH];
             let mut hit_lanes = [0u32; WIDTH];
-            let mut hit_tn = [Pf::splat(0.0); WIDTH];
+            let mut hit_tn = [L::Pf::splat(0.0); WIDTH];
             let mut n = 0;
             for i in 0..WIDTH {
                 let c = node.child[i];
@@ -1311,7 +1375,7 @@ pub(crate) fn walk_packet<const ANY: bool, const CONS: bool>(
                         }
                     }
                     hit_child[n] = if is_leaf(c) { c } else { c | LANE_MODE };
-                    hit_dist[n] = hmin(tn);
+                    hit_dist[n] = tn.hmin();
                     hit_lanes[n] = m;
                     hit_tn[n] = tn;
                     n += 1;
@@ -1383,7 +1447,7 @@ mod tests {
             let lane = |f: fn(&Ray) -> f32| Pf::new(std::array::from_fn(|l| chunk.get(l).map_or(1.0, f)));
             let o = [lane(|r| r.origin.x), lane(|r| r.origin.y), lane(|r| r.origin.z)];
             let d = [lane(|r| r.dir.x), lane(|r| r.dir.y), lane(|r| r.dir.z)];
-            let slabs = LaneSlabs::of(&o, &d);
+            let slabs = LaneSlabs::<Native>::of(&o, &d);
             for (l, ray) in chunk.iter().enumerate() {
                 let (a, b) = (slabs.lane(l), SlabTerms::of(ray));
                 let bits = |t: &SlabTerms| {

@@ -53,54 +53,60 @@ impl Kernel for Badouel {
     type Pre = ();
 
     #[inline(always)]
-    fn pre(_: &Ray4) {}
+    fn pre<L: Level>(_: &Ray4<L>) {}
 
     #[inline(always)]
-    fn lanes1(b: &TriBlock, r: &Ray4, _: &(), tnear: f32, tfar: f32) -> Option<BlockHits> {
+    fn lanes1<L: Level>(b: &TriBlock, r: &Ray4<L>, _: &(), tnear: f32, tfar: f32) -> Option<BlockHits<L::F4>> {
         // Per lane, the ray's components along k, u = k + 1 and v = k + 2.
-        let kf = f32x4::new(std::array::from_fn(|l| (b.aux(l) & 3) as f32));
-        let (k0, k1) = (kf.simd_eq(f32x4::splat(0.0)), kf.simd_eq(f32x4::splat(1.0)));
-        let sel = |x: f32x4, y: f32x4, z: f32x4| k0.select(x, k1.select(y, z));
+        let kf = L::F4::new(std::array::from_fn(|l| (b.aux(l) & 3) as f32));
+        let (k0, k1) = (kf.simd_eq(L::F4::splat(0.0)), kf.simd_eq(L::F4::splat(1.0)));
+        let sel = |x: L::F4, y: L::F4, z: L::F4| k0.select(x, k1.select(y, z));
         let (o, d) = (&r.o, &r.d);
         let (ok, ou, ov) = (sel(o[0], o[1], o[2]), sel(o[1], o[2], o[0]), sel(o[2], o[0], o[1]));
         let (dk, du, dv) = (sel(d[0], d[1], d[2]), sel(d[1], d[2], d[0]), sel(d[2], d[0], d[1]));
-        let row = |i: usize| f32x4::new(b.rows[i]);
+        let row = |i: usize| L::F4::new(b.rows[i]);
         let (nu, nv, nd) = (row(0), row(1), row(2));
         // Plane first: t and the projected hit point.
         let den = dk + nu * du + nv * dv;
         let t = (nd - ok - nu * ou - nv * ov) / den;
-        let zero = f32x4::splat(0.0);
+        let zero = L::F4::splat(0.0);
         let valid = den.simd_ne(zero)
-            & f32x4::splat(tnear).simd_lt(t)
-            & t.simd_le(f32x4::splat(tfar))
-            & t.simd_lt(f32x4::splat(f32::INFINITY));
+            & L::F4::splat(tnear).simd_lt(t)
+            & t.simd_le(L::F4::splat(tfar))
+            & t.simd_lt(L::F4::splat(f32::INFINITY));
         if valid.to_bitmask() == 0 {
             return None;
         }
         let (hu, hv) = (ou + t * du, ov + t * dv);
         let beta = row(3) * hu + row(4) * hv + row(5);
         let gamma = row(6) * hu + row(7) * hv + row(8);
-        let valid = valid & beta.simd_ge(zero) & gamma.simd_ge(zero) & (beta + gamma).simd_le(f32x4::splat(1.0));
+        let valid = valid & beta.simd_ge(zero) & gamma.simd_ge(zero) & (beta + gamma).simd_le(L::F4::splat(1.0));
         Some((valid, t, beta, gamma))
     }
 
     #[inline(always)]
-    fn intersect_packet(b: &TriBlock, lane: usize, r: &RayK, tfar: Pf, active: Pf) -> (Pf, Pf, Pf, Pf) {
+    fn intersect_packet<L: Level>(
+        b: &TriBlock,
+        lane: usize,
+        r: &RayK<L>,
+        tfar: L::Pf,
+        active: L::Pf,
+    ) -> (L::Pf, L::Pf, L::Pf, L::Pf) {
         let k = ((b.aux(lane) & 3) as usize).min(2);
         let (u, v) = ((k + 1) % 3, (k + 2) % 3);
-        let s = |i: usize| Pf::splat(b.rows[i][lane]);
+        let s = |i: usize| L::Pf::splat(b.rows[i][lane]);
         let den = r.d[k] + s(0) * r.d[u] + s(1) * r.d[v];
         let t = (s(2) - r.o[k] - s(0) * r.o[u] - s(1) * r.o[v]) / den;
-        let zero = Pf::splat(0.0);
+        let zero = L::Pf::splat(0.0);
         let valid =
-            active & den.simd_ne(zero) & r.tnear.simd_lt(t) & t.simd_le(tfar) & t.simd_lt(Pf::splat(f32::INFINITY));
+            active & den.simd_ne(zero) & r.tnear.simd_lt(t) & t.simd_le(tfar) & t.simd_lt(L::Pf::splat(f32::INFINITY));
         if valid.to_bitmask() == 0 {
             return (valid, zero, zero, zero);
         }
         let (hu, hv) = (r.o[u] + t * r.d[u], r.o[v] + t * r.d[v]);
         let beta = s(3) * hu + s(4) * hv + s(5);
         let gamma = s(6) * hu + s(7) * hv + s(8);
-        let valid = valid & beta.simd_ge(zero) & gamma.simd_ge(zero) & (beta + gamma).simd_le(Pf::splat(1.0));
+        let valid = valid & beta.simd_ge(zero) & gamma.simd_ge(zero) & (beta + gamma).simd_le(L::Pf::splat(1.0));
         (valid, t, beta, gamma)
     }
 }

@@ -130,57 +130,67 @@ impl TriBlock {
 
 /// A ray splatted for one block test, with per-ray data some tests precompute.
 #[derive(Clone, Copy)]
-pub(crate) struct Ray4 {
-    pub o: [f32x4; 3],
-    pub d: [f32x4; 3],
+pub(crate) struct Ray4<L: Level> {
+    pub o: [L::F4; 3],
+    pub d: [L::F4; 3],
     /// The direction itself, for tests that permute axes per ray.
     pub ds: Vec3,
 }
 
-impl Ray4 {
-    #[inline]
+impl<L: Level> Ray4<L> {
+    #[inline(always)]
     pub fn new(o: Vec3, d: Vec3) -> Self {
-        Self {
-            o: [f32x4::splat(o.x), f32x4::splat(o.y), f32x4::splat(o.z)],
-            d: [f32x4::splat(d.x), f32x4::splat(d.y), f32x4::splat(d.z)],
-            ds: d,
-        }
+        let s = <L::F4 as SimdF>::splat;
+        Self { o: [s(o.x), s(o.y), s(o.z)], d: [s(d.x), s(d.y), s(d.z)], ds: d }
     }
 }
 
 /// Packet lanes in SoA form for the broadcast tests. Kept to the vectors the tests use, so that
 /// they stay in registers (with two per-lane `Vec3` arrays added, Sponza's primary packets lost 13%).
 #[derive(Clone, Copy)]
-pub(crate) struct RayK {
-    pub o: [Pf; 3],
-    pub d: [Pf; 3],
-    pub tnear: Pf,
+pub(crate) struct RayK<L: Level> {
+    pub o: [L::Pf; 3],
+    pub d: [L::Pf; 3],
+    pub tnear: L::Pf,
 }
 
 /// A block test's result for one ray: `(valid, t, u, v)`, four lanes each.
-pub(crate) type BlockHits = (f32x4, f32x4, f32x4, f32x4);
+pub(crate) type BlockHits<V> = (V, V, V, V);
 
-/// One ray–triangle test in its two SIMD forms. `Pre` is what the test precomputes per ray.
+/// One ray–triangle test in its two SIMD forms, for every [`Level`]. `Pre` is what the test
+/// precomputes per ray.
 pub(crate) trait Kernel {
     type Pre: Copy;
 
-    fn pre(r: &Ray4) -> Self::Pre;
+    fn pre<L: Level>(r: &Ray4<L>) -> Self::Pre;
 
     /// Every triangle of a block one ray hits in `(tnear, tfar]`: the valid lanes (all bits set)
     /// with their `t`, `u`, `v`; `None` where no lane can hit. Lanes outside the mask hold
     /// anything.
-    fn lanes1(b: &TriBlock, r: &Ray4, pre: &Self::Pre, tnear: f32, tfar: f32) -> Option<BlockHits>;
+    fn lanes1<L: Level>(b: &TriBlock, r: &Ray4<L>, pre: &Self::Pre, tnear: f32, tfar: f32) -> Option<BlockHits<L::F4>>;
 
     /// The nearest hit of one ray among the triangles of a block in `(tnear, tfar]`, as
     /// `(lane, t, u, v)`; among equal distances the lowest lane wins.
     #[inline(always)]
-    fn intersect1(b: &TriBlock, r: &Ray4, pre: &Self::Pre, tnear: f32, tfar: f32) -> Option<(usize, f32, f32, f32)> {
+    fn intersect1<L: Level>(
+        b: &TriBlock,
+        r: &Ray4<L>,
+        pre: &Self::Pre,
+        tnear: f32,
+        tfar: f32,
+    ) -> Option<(usize, f32, f32, f32)> {
         Self::lanes1(b, r, pre, tnear, tfar).and_then(|(valid, t, u, v)| nearest(valid, t, u, v))
     }
 
     /// The lanes of a packet (within `active`) hitting triangle `lane` of `b` in `(tnear, tfar]`,
     /// with their `t`, `u`, `v`.
-    fn intersect_packet(b: &TriBlock, lane: usize, r: &RayK, tfar: Pf, active: Pf) -> (Pf, Pf, Pf, Pf);
+    fn intersect_packet<L: Level>(
+        b: &TriBlock,
+        lane: usize,
+        r: &RayK<L>,
+        tfar: L::Pf,
+        active: L::Pf,
+    ) -> (L::Pf, L::Pf, L::Pf, L::Pf);
 }
 
 /// The last checks of a hit whose depth test passed in its scaled form (`tnear·|den| < t·|den|`):
@@ -190,46 +200,26 @@ pub(crate) trait Kernel {
 /// tiny `t` to 0; a tiny one, without flush-to-zero, lets `tfar·|det|` round up to the smallest
 /// denormal and a `t` of twice `tfar` through: hits outside the interval `(tnear, tfar]`).
 #[inline(always)]
-pub(crate) fn sane<V: SaneLanes>(inv: V, t: V, tnear: V, tfar: V) -> V {
-    V::sane(inv, t, tnear, tfar)
-}
-
-/// [`sane`] for the block (4 lanes) and packet (16 lanes) forms.
-pub(crate) trait SaneLanes: Copy {
-    fn sane(inv: Self, t: Self, tnear: Self, tfar: Self) -> Self;
-}
-
-impl SaneLanes for f32x4 {
-    #[inline(always)]
-    fn sane(inv: Self, t: Self, tnear: Self, tfar: Self) -> Self {
-        let inf = f32x4::splat(f32::INFINITY);
-        inv.abs().simd_lt(inf) & t.simd_lt(inf) & tnear.simd_lt(t) & t.simd_le(tfar)
-    }
-}
-
-impl SaneLanes for Pf {
-    #[inline(always)]
-    fn sane(inv: Self, t: Self, tnear: Self, tfar: Self) -> Self {
-        let inf = Pf::splat(f32::INFINITY);
-        inv.abs().simd_lt(inf) & t.simd_lt(inf) & tnear.simd_lt(t) & t.simd_le(tfar)
-    }
+pub(crate) fn sane<V: SimdF>(inv: V, t: V, tnear: V, tfar: V) -> V {
+    let inf = V::splat(f32::INFINITY);
+    inv.abs().simd_lt(inf) & t.simd_lt(inf) & tnear.simd_lt(t) & t.simd_le(tfar)
 }
 
 /// Picks the nearest valid lane of a block test: `(lane, t, u, v)`.
 #[inline(always)]
-pub(crate) fn nearest(valid: f32x4, t: f32x4, u: f32x4, v: f32x4) -> Option<(usize, f32, f32, f32)> {
+pub(crate) fn nearest<V: Four>(valid: V, t: V, u: V, v: V) -> Option<(usize, f32, f32, f32)> {
     let bits = valid.to_bitmask();
     if bits == 0 {
         return None;
     }
-    let t = valid.select(t, f32x4::splat(f32::INFINITY));
+    let t = valid.select(t, V::splat(f32::INFINITY));
     // In registers (see `min4`). The kernels' valid lanes hold finite distances, so the minimum
     // is one of theirs; the fallback only keeps the lane index inside the block.
-    let tmin = min4(t);
-    let at_min = t.simd_eq(f32x4::splat(tmin)).to_bitmask() & bits;
+    let tmin = t.min4();
+    let at_min = t.simd_eq(V::splat(tmin)).to_bitmask() & bits;
     debug_assert!(at_min != 0, "a valid lane holds the minimum");
     let best = if at_min != 0 { at_min } else { bits }.trailing_zeros() as usize;
-    Some((best, tmin, lane4(u, best), lane4(v, best)))
+    Some((best, tmin, u.lane4(best), v.lane4(best)))
 }
 
 /// `a × b` in Embree's form (`vec3.h`): `msub(a.y, b.z, a.z·b.y)` per component, fused where the
@@ -250,7 +240,7 @@ pub(crate) fn dot<T: Fma>(a: [T; 3], b: [T; 3]) -> T {
 pub fn intersect_triangle(test: TriangleTest, ray: &crate::ray::Ray, tri: [Vec3; 3]) -> Option<(f32, f32, f32)> {
     use super::{badouel::Badouel, moeller::Moller, watertight::Watertight};
     fn run<K: Kernel>(b: &TriBlock, ray: &crate::ray::Ray) -> Option<(f32, f32, f32)> {
-        let r = Ray4::new(ray.origin, ray.dir);
+        let r = Ray4::<Native>::new(ray.origin, ray.dir);
         K::intersect1(b, &r, &K::pre(&r), ray.tnear, ray.tfar).map(|(_, t, u, v)| (t, u, v))
     }
     if !ray.is_valid() {
@@ -296,7 +286,7 @@ mod tests {
     }
 
     fn one<K: Kernel>(b: &TriBlock, o: Vec3, d: Vec3, tnear: f32, tfar: f32) -> Option<(usize, f32, f32, f32)> {
-        let r = Ray4::new(o, d);
+        let r = Ray4::<Native>::new(o, d);
         K::intersect1(b, &r, &K::pre(&r), tnear, tfar)
     }
 
@@ -361,7 +351,7 @@ mod tests {
             tnear: Pf::splat(0.0),
         };
         let all = Pf::splat(0.0).simd_eq(Pf::splat(0.0));
-        let (valid, t, _, _) = K::intersect_packet(&blk, 0, &rk, Pf::splat(f32::INFINITY), all);
+        let (valid, t, _, _) = K::intersect_packet::<Native>(&blk, 0, &rk, Pf::splat(f32::INFINITY), all);
         let (bits, t) = (valid.to_bitmask(), t.to_array());
         let mut hits = 0;
         for i in 0..PACKET_WIDTH {

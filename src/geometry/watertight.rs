@@ -62,28 +62,28 @@ impl Kernel for Watertight {
     type Pre = Shear;
 
     #[inline(always)]
-    fn pre(r: &Ray4) -> Shear {
+    fn pre<L: Level>(r: &Ray4<L>) -> Shear {
         Shear::new(r.ds)
     }
 
     #[inline(always)]
-    fn lanes1(b: &TriBlock, r: &Ray4, sh: &Shear, tnear: f32, tfar: f32) -> Option<BlockHits> {
+    fn lanes1<L: Level>(b: &TriBlock, r: &Ray4<L>, sh: &Shear, tnear: f32, tfar: f32) -> Option<BlockHits<L::F4>> {
         let [kx, ky, kz] = sh.k;
-        let rel = |first: usize| -> [f32x4; 3] { std::array::from_fn(|a| f32x4::new(b.rows[first + a]) - r.o[a]) };
+        let rel = |first: usize| -> [L::F4; 3] { std::array::from_fn(|a| L::F4::new(b.rows[first + a]) - r.o[a]) };
         let (a, bb, c) = (rel(0), rel(3), rel(6));
-        let (sx, sy, sz) = (f32x4::splat(sh.s[0]), f32x4::splat(sh.s[1]), f32x4::splat(sh.s[2]));
-        let shear = |p: &[f32x4; 3]| (p[kx] - sx * p[kz], p[ky] - sy * p[kz]);
+        let (sx, sy, sz) = (L::F4::splat(sh.s[0]), L::F4::splat(sh.s[1]), L::F4::splat(sh.s[2]));
+        let shear = |p: &[L::F4; 3]| (p[kx] - sx * p[kz], p[ky] - sy * p[kz]);
         let ((ax, ay), (bx, by), (cx, cy)) = (shear(&a), shear(&bb), shear(&c));
         let mut u = cx * by - cy * bx;
         let mut v = ax * cy - ay * cx;
         let mut w = bx * ay - by * ax;
-        let zero = f32x4::splat(0.0);
+        let zero = L::F4::splat(0.0);
         // Exactly-zero edge functions: recompute those lanes in float64.
         let zeros = (u.simd_eq(zero) | v.simd_eq(zero) | w.simd_eq(zero)).to_bitmask();
         if zeros != 0 {
-            let g = |x: f32x4| x.to_array();
+            let g = |x: L::F4| x.to_array();
             let (ua, va, wa) = edges_f64(zeros, [g(u), g(v), g(w)], [g(ax), g(ay), g(bx), g(by), g(cx), g(cy)]);
-            (u, v, w) = (f32x4::new(ua), f32x4::new(va), f32x4::new(wa));
+            (u, v, w) = (L::F4::new(ua), L::F4::new(va), L::F4::new(wa));
         }
         let neg = u.simd_lt(zero) | v.simd_lt(zero) | w.simd_lt(zero);
         let pos = u.simd_gt(zero) | v.simd_gt(zero) | w.simd_gt(zero);
@@ -93,30 +93,36 @@ impl Kernel for Watertight {
             return None;
         }
         let t_scaled = u * (sz * a[kz]) + v * (sz * bb[kz]) + w * (sz * c[kz]);
-        let sgn = det & f32x4::splat(-0.0);
+        let sgn = det & L::F4::splat(-0.0);
         let t_s = t_scaled ^ sgn;
         let abs_det = det.abs();
-        let valid = valid & (abs_det * f32x4::splat(tnear)).simd_lt(t_s) & t_s.simd_le(abs_det * f32x4::splat(tfar));
+        let valid = valid & (abs_det * L::F4::splat(tnear)).simd_lt(t_s) & t_s.simd_le(abs_det * L::F4::splat(tfar));
         if valid.to_bitmask() == 0 {
             return None;
         }
-        let inv = f32x4::splat(1.0) / det;
+        let inv = L::F4::splat(1.0) / det;
         let t = t_s / abs_det;
-        Some((valid & sane(inv, t, f32x4::splat(tnear), f32x4::splat(tfar)), t, v * inv, w * inv))
+        Some((valid & sane(inv, t, L::F4::splat(tnear), L::F4::splat(tfar)), t, v * inv, w * inv))
     }
 
     /// All lanes at once: each lane's axis permutation and shear are selected by mask, so the
     /// arithmetic is the single-ray form's, operation for operation (bit-identical results).
     #[inline(always)]
-    fn intersect_packet(b: &TriBlock, lane: usize, r: &RayK, tfar: Pf, active: Pf) -> (Pf, Pf, Pf, Pf) {
-        let zero = Pf::splat(0.0);
+    fn intersect_packet<L: Level>(
+        b: &TriBlock,
+        lane: usize,
+        r: &RayK<L>,
+        tfar: L::Pf,
+        active: L::Pf,
+    ) -> (L::Pf, L::Pf, L::Pf, L::Pf) {
+        let zero = L::Pf::splat(0.0);
         let d = &r.d;
         let ad = [d[0].abs(), d[1].abs(), d[2].abs()];
         // kz = the dominant axis (ties resolved as in `Shear::new`).
         let zx = ad[0].simd_ge(ad[1]) & ad[0].simd_ge(ad[2]);
         let zy = !zx & ad[1].simd_ge(ad[2]);
         // Components along kz, kz + 1 and kz + 2, then kx/ky swapped where d[kz] < 0.
-        let perm = |p: &[Pf; 3]| -> [Pf; 3] {
+        let perm = |p: &[L::Pf; 3]| -> [L::Pf; 3] {
             let z = zx.select(p[0], zy.select(p[1], p[2]));
             let x = zx.select(p[1], zy.select(p[2], p[0]));
             let y = zx.select(p[2], zy.select(p[0], p[1]));
@@ -124,14 +130,14 @@ impl Kernel for Watertight {
         };
         let [dx0, dy0, dz] = perm(d);
         let neg = dz.simd_lt(zero);
-        let swap = |p: [Pf; 3]| [neg.select(p[1], p[0]), neg.select(p[0], p[1]), p[2]];
+        let swap = |p: [L::Pf; 3]| [neg.select(p[1], p[0]), neg.select(p[0], p[1]), p[2]];
         let [dx, dy, _] = swap([dx0, dy0, dz]);
-        let (sx, sy, sz) = (dx / dz, dy / dz, Pf::splat(1.0) / dz);
-        let rel = |first: usize| -> [Pf; 3] {
-            swap(perm(&std::array::from_fn(|a| Pf::splat(b.rows[first + a][lane]) - r.o[a])))
+        let (sx, sy, sz) = (dx / dz, dy / dz, L::Pf::splat(1.0) / dz);
+        let rel = |first: usize| -> [L::Pf; 3] {
+            swap(perm(&std::array::from_fn(|a| L::Pf::splat(b.rows[first + a][lane]) - r.o[a])))
         };
         let (a, bb, c) = (rel(0), rel(3), rel(6));
-        let shear = |p: &[Pf; 3]| (p[0] - sx * p[2], p[1] - sy * p[2]);
+        let shear = |p: &[L::Pf; 3]| (p[0] - sx * p[2], p[1] - sy * p[2]);
         let ((ax, ay), (bx, by), (cx, cy)) = (shear(&a), shear(&bb), shear(&c));
         let mut u = cx * by - cy * bx;
         let mut v = ax * cy - ay * cx;
@@ -139,9 +145,9 @@ impl Kernel for Watertight {
         // Exactly-zero edge functions: recompute those lanes in float64, as the single-ray form.
         let zeros = (active & (u.simd_eq(zero) | v.simd_eq(zero) | w.simd_eq(zero))).to_bitmask();
         if zeros != 0 {
-            let g = |x: Pf| x.to_array();
+            let g = |x: L::Pf| x.to_array();
             let (ua, va, wa) = edges_f64(zeros, [g(u), g(v), g(w)], [g(ax), g(ay), g(bx), g(by), g(cx), g(cy)]);
-            (u, v, w) = (Pf::new(ua), Pf::new(va), Pf::new(wa));
+            (u, v, w) = (L::Pf::new(ua), L::Pf::new(va), L::Pf::new(wa));
         }
         let negs = u.simd_lt(zero) | v.simd_lt(zero) | w.simd_lt(zero);
         let poss = u.simd_gt(zero) | v.simd_gt(zero) | w.simd_gt(zero);
@@ -151,10 +157,10 @@ impl Kernel for Watertight {
             return (valid, zero, zero, zero);
         }
         let t_scaled = u * (sz * a[2]) + v * (sz * bb[2]) + w * (sz * c[2]);
-        let t_s = t_scaled ^ (det & Pf::splat(-0.0));
+        let t_s = t_scaled ^ (det & L::Pf::splat(-0.0));
         let abs_det = det.abs();
         let valid = valid & (abs_det * r.tnear).simd_lt(t_s) & t_s.simd_le(abs_det * tfar);
-        let inv = Pf::splat(1.0) / det;
+        let inv = L::Pf::splat(1.0) / det;
         let t = t_s / abs_det;
         (valid & sane(inv, t, r.tnear, tfar), t, v * inv, w * inv)
     }

@@ -16,6 +16,7 @@ use crate::geometry::triangle::{Kernel, Ray4};
 use crate::geometry::watertight::Watertight;
 use crate::instance::InstancedScene;
 use crate::ray::{Hit, Ray};
+use crate::simd::Native;
 
 impl Bvh {
     /// Calls `f` for every triangle `ray` hits in `(tnear, tfar]`, in no particular order (a
@@ -40,12 +41,12 @@ impl Bvh {
             return;
         }
         let base = stack.push_root(self.root);
-        let r4 = Ray4::new(ray.origin, ray.dir);
+        let r4 = Ray4::<Native>::new(ray.origin, ray.dir);
         let pre = K::pre(&r4);
-        let br = BoxRay::with_terms(SlabTerms::of(ray), ray.tnear);
+        let br = BoxRay::<Native>::with_terms(SlabTerms::of(ray), ray.tnear);
         // The walk's `tfar` stays the ray's: every subtree the ray enters is visited.
         let mut tfar = ray.tfar;
-        walk1::<false, CONS>(self.tree(), &br, stack, base, &mut tfar, |leaf, tfar, _| {
+        walk1::<false, CONS, Native>(self.tree(), &br, stack, base, &mut tfar, |leaf, tfar, _| {
             let (start, count) = leaf_blocks(leaf);
             for bi in start..start + count {
                 let Some((valid, t, u, v)) = K::lanes1(&self.blocks[bi], &r4, &pre, ray.tnear, *tfar) else {
@@ -78,10 +79,10 @@ impl InstancedScene {
 
     fn each_hit_with<K: Kernel, const CONS: bool>(&self, ray: &Ray, stack: &mut Stack, f: &mut impl FnMut(&Hit)) {
         let Some(root) = self.top_root() else { return };
-        let br = BoxRay::with_terms(SlabTerms::of(ray), ray.tnear);
+        let br = BoxRay::<Native>::with_terms(SlabTerms::of(ray), ray.tnear);
         let mut tfar = ray.tfar;
         let base = stack.push_root(root);
-        walk1::<false, CONS>(self.top_tree(), &br, stack, base, &mut tfar, |leaf, _, stack| {
+        walk1::<false, CONS, Native>(self.top_tree(), &br, stack, base, &mut tfar, |leaf, _, stack| {
             let (start, count) = leaf_blocks(leaf);
             for k in start..start + count {
                 let (object, r) = self.object_ray_of(k, ray);

@@ -18,6 +18,7 @@ use crate::bvh::{BoxTest, BuildConfig, BuildStats, PlacedTree, place_tree};
 use crate::error::{Error, Result};
 use crate::geometry::triangle::BLOCK;
 use crate::ray::{Hit, HitPacket, INVALID_ID, PACKET_WIDTH, Ray, RayPacket};
+use crate::simd::Native;
 
 /// A built BVH over solids.
 #[derive(Clone, Debug)]
@@ -159,10 +160,10 @@ impl SolidBvh {
             return None;
         }
         let base = stack.push_root(self.root);
-        let br = BoxRay::with_terms(SlabTerms::of(ray), ray.tnear);
+        let br = BoxRay::<Native>::with_terms(SlabTerms::of(ray), ray.tnear);
         let mut tfar = ray.tfar;
         let mut best = None;
-        walk1::<ANY, CONS>(self.tree(), &br, stack, base, &mut tfar, |leaf, tfar, _| {
+        walk1::<ANY, CONS, Native>(self.tree(), &br, stack, base, &mut tfar, |leaf, tfar, _| {
             let (start, count) = leaf_blocks(leaf);
             for block in &self.blocks[start..start + count] {
                 for &s in block.iter().take_while(|&&s| s != u32::MAX) {
@@ -264,9 +265,9 @@ impl SolidBvh {
             return;
         }
         let base = stack.push_root(self.root);
-        let br = BoxRay::with_terms(SlabTerms::of(ray), ray.tnear);
+        let br = BoxRay::<Native>::with_terms(SlabTerms::of(ray), ray.tnear);
         let mut tfar = ray.tfar;
-        walk1::<false, CONS>(self.tree(), &br, stack, base, &mut tfar, |leaf, tfar, _| {
+        walk1::<false, CONS, Native>(self.tree(), &br, stack, base, &mut tfar, |leaf, tfar, _| {
             let (start, count) = leaf_blocks(leaf);
             for block in &self.blocks[start..start + count] {
                 for &s in block.iter().take_while(|&&s| s != u32::MAX) {

@@ -259,10 +259,10 @@ impl SphereBvh {
     ) -> Option<LeafHit> {
         let base = stack.push_root(root);
         let lanes = RayLanes::splat(ray.origin, ray.dir);
-        let br = BoxRay::with_terms(terms, ray.tnear);
+        let br = BoxRay::<Native>::with_terms(terms, ray.tnear);
         let mut tfar = ray.tfar;
         let mut best = None;
-        walk1::<ANY, CONS>(self.tree(), &br, stack, base, &mut tfar, |leaf, tfar, _| {
+        walk1::<ANY, CONS, Native>(self.tree(), &br, stack, base, &mut tfar, |leaf, tfar, _| {
             let (start, count) = leaf_blocks(leaf);
             for bi in start..start + count {
                 if let Some((lane, t)) = sphere::intersect1(K::TEST, &self.blocks[bi], &lanes, ray.tnear, *tfar) {
@@ -299,13 +299,13 @@ impl SphereBvh {
         out: &mut PacketHits<'_>,
         stack: &mut Stack,
     ) {
-        let Some((pb, mut tfar)) = PacketBoxes::new(p) else {
+        let Some((pb, mut tfar)) = PacketBoxes::<Native>::new(p) else {
             return;
         };
         let base = stack.push_root(self.root);
         let rl = RayLanes::new(pb.o, pb.d);
         let switch = pb.frustum.is_none();
-        walk_packet::<ANY, CONS>(self.tree(), &pb, stack, base, &mut tfar, |leaf, lanes, tfar, stack| {
+        walk_packet::<ANY, CONS, Native>(self.tree(), &pb, stack, base, &mut tfar, |leaf, lanes, tfar, stack| {
             // Closest hit without a frustum (incoherent packets): a leaf few lanes are still open
             // for goes lane by lane, four spheres per test, instead of sixteen lanes per sphere.
             // Diffuse rays, level-6 flake, 2 threads, best vs best against Embree: 0.98 before,
@@ -318,7 +318,7 @@ impl SphereBvh {
                 lanes
             };
             if lanes != 0 {
-                out.mask |= each_lane_alone::<ANY, _>(
+                out.mask |= each_lane_alone::<ANY, _, Native>(
                     p,
                     lanes,
                     tfar,
@@ -343,7 +343,7 @@ impl SphereBvh {
     fn leaf_packet<const ANY: bool, K: SphereKernel>(
         &self,
         leaf: u32,
-        pb: &PacketBoxes,
+        pb: &PacketBoxes<Native>,
         lanes: &RayLanes<Pf>,
         tfar: &mut Pf,
         out: &mut PacketHits<'_>,
@@ -378,7 +378,7 @@ impl SphereBvh {
                     t.mul_add(pb.d[2], pb.o[2]) - Pf::splat(c.z),
                 ];
                 let zero = Pf::splat(0.0);
-                out.select_hit(valid, (t, zero, zero), ng, blk.prim[lane], blk.geom[lane]);
+                out.select_hit::<Native>(valid, (t, zero, zero), ng, blk.prim[lane], blk.geom[lane]);
             }
         }
         false
@@ -428,10 +428,10 @@ impl SphereBvh {
         let rl = RayLanes::splat(ray.origin, ray.dir);
         let test = self.test;
         let base = stack.push_root(self.root);
-        let br = BoxRay::with_terms(SlabTerms::of(ray), ray.tnear);
+        let br = BoxRay::<Native>::with_terms(SlabTerms::of(ray), ray.tnear);
         // The walk's `tfar` stays the ray's: every subtree the ray enters is visited.
         let mut tfar = ray.tfar;
-        walk1::<false, CONS>(self.tree(), &br, stack, base, &mut tfar, |leaf, tfar, _| {
+        walk1::<false, CONS, Native>(self.tree(), &br, stack, base, &mut tfar, |leaf, tfar, _| {
             let (start, count) = leaf_blocks(leaf);
             for bi in start..start + count {
                 let b = &self.blocks[bi];

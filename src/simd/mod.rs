@@ -7,6 +7,16 @@
 //! that gives the same answers.
 #![allow(unsafe_code)]
 
+mod level;
+mod native;
+#[cfg(target_arch = "x86_64")]
+mod x86;
+
+#[cfg(target_arch = "x86_64")]
+pub(crate) use level::{Avx2, Avx512};
+pub use level::{Isa, isa, set_isa};
+pub(crate) use level::{Level, Native, with_level};
+
 use wide::i32x16;
 pub(crate) use wide::{bytemuck, i32x8};
 pub(crate) use wide::{f32x4, f32x8, f32x16};
@@ -106,21 +116,91 @@ pub(crate) trait Fma: Copy + core::ops::Mul<Output = Self> {
     fn msub(self, b: Self, c: Self) -> Self;
 }
 
-macro_rules! fma {
-    ($($f:ty),*) => {$(
-        impl Fma for $f {
-            #[inline(always)]
-            fn madd(self, b: Self, c: Self) -> Self {
-                self.mul_add(b, c)
-            }
-            #[inline(always)]
-            fn msub(self, b: Self, c: Self) -> Self {
-                self.mul_sub(b, c)
-            }
-        }
-    )*};
+impl<T: SimdF> Fma for T {
+    #[inline(always)]
+    fn madd(self, b: Self, c: Self) -> Self {
+        self.mul_add(b, c)
+    }
+    #[inline(always)]
+    fn msub(self, b: Self, c: Self) -> Self {
+        self.mul_sub(b, c)
+    }
 }
-fma!(f32x4, f32x8, f32x16);
+
+/// The lane operations the triangle and box kernels are written against, once for every level
+/// ([`Level`]) and width: `wide`'s names and meanings (comparisons return masks with all bits
+/// set in the lanes where they hold; `max`/`min` return `self` where `b` is NaN, `fast_max`/
+/// `fast_min` are the bare instructions), so that the compiled level's code is `wide`'s own.
+pub(crate) trait SimdF:
+    Copy
+    + Send
+    + Sync
+    + 'static
+    + core::ops::Add<Output = Self>
+    + core::ops::Sub<Output = Self>
+    + core::ops::Mul<Output = Self>
+    + core::ops::Div<Output = Self>
+    + core::ops::Neg<Output = Self>
+    + core::ops::BitAnd<Output = Self>
+    + core::ops::BitOr<Output = Self>
+    + core::ops::BitXor<Output = Self>
+    + core::ops::Not<Output = Self>
+    + core::ops::BitAndAssign
+    + core::ops::BitOrAssign
+{
+    /// The lanes as an array (`[f32; N]`).
+    type Arr: Copy + AsRef<[f32]> + AsMut<[f32]>;
+    fn splat(x: f32) -> Self;
+    fn new(a: Self::Arr) -> Self;
+    fn to_array(self) -> Self::Arr;
+    fn abs(self) -> Self;
+    fn sqrt(self) -> Self;
+    /// `self` with the sign of `s`.
+    fn copysign(self, s: Self) -> Self;
+    /// The larger lane; `self` where `b` is NaN.
+    fn max(self, b: Self) -> Self;
+    /// The smaller lane; `self` where `b` is NaN.
+    fn min(self, b: Self) -> Self;
+    /// `maxps`: `b` where either is NaN.
+    fn fast_max(self, b: Self) -> Self;
+    /// `minps`: `b` where either is NaN.
+    fn fast_min(self, b: Self) -> Self;
+    fn simd_lt(self, b: Self) -> Self;
+    fn simd_le(self, b: Self) -> Self;
+    fn simd_gt(self, b: Self) -> Self;
+    fn simd_ge(self, b: Self) -> Self;
+    fn simd_eq(self, b: Self) -> Self;
+    /// Unordered: true where either lane is NaN.
+    fn simd_ne(self, b: Self) -> Self;
+    /// Per lane: `t` where the mask `self` is set, else `f`.
+    fn select(self, t: Self, f: Self) -> Self;
+    /// The lanes' sign bits, lane 0 lowest.
+    fn to_bitmask(self) -> u32;
+    fn any(self) -> bool;
+    fn all(self) -> bool;
+    /// `self·b + c`, fused where the level has FMA.
+    fn mul_add(self, b: Self, c: Self) -> Self;
+    /// `self·b − c`, fused where the level has FMA.
+    fn mul_sub(self, b: Self, c: Self) -> Self;
+}
+
+/// Four-lane extras: a block test's nearest lane.
+pub(crate) trait Four: SimdF<Arr = [f32; 4]> {
+    /// Smallest lane (no NaN lanes).
+    fn min4(self) -> f32;
+    /// Lane `l & 3`.
+    fn lane4(self, l: usize) -> f32;
+}
+
+/// Packet extras (sixteen lanes).
+pub(crate) trait Packet: SimdF<Arr = [f32; 16]> + BitOrder {
+    /// Smallest lane (no NaN lanes).
+    fn hmin(self) -> f32;
+    /// Largest lane (no NaN lanes).
+    fn hmax(self) -> f32;
+    /// A select mask with the lanes of `bits` set.
+    fn lane_mask(bits: u32) -> Self;
+}
 
 /// The lane operations the shape kernels are written against once for every width: four
 /// lanes (one ray against a leaf block), sixteen (a packet against one shape).

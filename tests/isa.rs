@@ -1,0 +1,131 @@
+//! Every instruction-set level this machine runs answers every query like the others: the same
+//! hits, with distances that differ by float rounding only (fused against separate multiply-adds where the crate is compiled without FMA),
+//! for every triangle test and box test, flat and instanced, single rays, packets and streams.
+//!
+//! This file is its own test binary (its own process), so switching the level with
+//! `strahl::simd::set_isa` cannot disturb other tests. The whole suite also runs once per level
+//! through `STRAHL_ISA` (`.ci/run`).
+
+mod common;
+
+use common::{assert_same_hit, random_rays, random_soup};
+use glam::{Affine3A, Quat, Vec3};
+use strahl::procedural::uv_sphere;
+use strahl::simd::{Isa, isa, set_isa};
+use strahl::{
+    BoxTest, BuildConfig, Coherence, Hit, HitStream, Instance, InstancedScene, Query, Ray, RayPacket, RayStream, Scene,
+    TriangleTest,
+};
+
+/// Every answer a scene gives for `rays`, through each query shape.
+struct Answers {
+    single: Vec<Option<Hit>>,
+    occluded: Vec<bool>,
+    packets: Vec<Option<Hit>>,
+    packet_occluded: Vec<bool>,
+    streams: [Vec<Option<Hit>>; 2],
+    stream_occluded: [Vec<bool>; 2],
+}
+
+fn answers<Q: Query>(q: &Q, rays: &[Ray]) -> Answers {
+    let single = rays.iter().map(|r| q.intersect(r)).collect();
+    let occluded = rays.iter().map(|r| q.occluded(r)).collect();
+    let mut packets = vec![None; rays.len()];
+    let mut packet_occluded = vec![false; rays.len()];
+    for (k, chunk) in rays.chunks(16).enumerate() {
+        let p = RayPacket::from_rays(chunk);
+        q.intersect_packet_each(&p, |lane, h| packets[16 * k + lane] = Some(*h));
+        let m = q.occluded_packet(&p);
+        for lane in 0..chunk.len() {
+            packet_occluded[16 * k + lane] = m & (1 << lane) != 0;
+        }
+    }
+    let mut stream = RayStream::with_capacity(rays.len());
+    for r in rays {
+        stream.push(r);
+    }
+    let mut streams: [Vec<Option<Hit>>; 2] = Default::default();
+    let mut stream_occluded: [Vec<bool>; 2] = Default::default();
+    for (i, c) in [Coherence::Coherent, Coherence::Incoherent].into_iter().enumerate() {
+        let mut hits = HitStream::misses(0);
+        q.intersect_stream(&stream, &mut hits, c);
+        streams[i] = (0..rays.len()).map(|k| hits.get(k)).collect();
+        q.occluded_stream(&stream, &mut stream_occluded[i], c);
+    }
+    Answers { single, occluded, packets, packet_occluded, streams, stream_occluded }
+}
+
+fn same(a: &Answers, b: &Answers, what: &str) {
+    // Rounding may move a hit by a few ulps; a ray grazing an edge may then find the neighbour
+    // (assert_same_hit accepts a different triangle at the same distance).
+    let rel = 2e-5;
+    for i in 0..a.single.len() {
+        assert_same_hit(a.single[i], b.single[i], rel, &format!("{what}: single ray {i}"));
+        assert_same_hit(a.packets[i], b.packets[i], rel, &format!("{what}: packet ray {i}"));
+        for s in 0..2 {
+            assert_same_hit(a.streams[s][i], b.streams[s][i], rel, &format!("{what}: stream {s} ray {i}"));
+        }
+    }
+    let flips = |x: &[bool], y: &[bool]| x.iter().zip(y).filter(|(p, q)| p != q).count();
+    // Occlusion of rays from outside towards a closed soup: a flip needs a ray through a shared
+    // edge within rounding, rarer than 1 in 1000 here.
+    let limit = a.occluded.len() / 1000 + 1;
+    assert!(flips(&a.occluded, &b.occluded) <= limit, "{what}: single occlusion");
+    assert!(flips(&a.packet_occluded, &b.packet_occluded) <= limit, "{what}: packet occlusion");
+    for s in 0..2 {
+        assert!(flips(&a.stream_occluded[s], &b.stream_occluded[s]) <= limit, "{what}: stream occlusion {s}");
+    }
+}
+
+#[test]
+fn every_level_answers_like_the_compiled_one() {
+    let levels: Vec<Isa> = Isa::ALL.into_iter().filter(|i| i.supported()).collect();
+    for i in Isa::ALL {
+        assert_eq!(set_isa(i).is_ok(), i.supported(), "{i}");
+    }
+    let mut rays = random_rays(71, 3000);
+    // Camera-like rays from one origin, so that packets share an origin (frusta, groups).
+    for k in 0..1024 {
+        let (x, y) = ((k % 32) as f32 / 16.0 - 1.0, (k / 32) as f32 / 16.0 - 1.0);
+        rays.push(Ray::new(Vec3::new(0.0, 0.0, 3.0), Vec3::new(x, y, -3.0)));
+    }
+    for test in [TriangleTest::MollerTrumbore, TriangleTest::Badouel, TriangleTest::Watertight] {
+        for box_test in [BoxTest::Conservative, BoxTest::Fast] {
+            let cfg = BuildConfig { triangle_test: test, box_test, ..BuildConfig::default() };
+            let meshes = vec![random_soup(5, 2000, 0.1), uv_sphere(Vec3::new(0.2, -0.1, 0.0), 0.6, 24, 48)];
+            let scene = Scene::build(meshes.clone(), &cfg).unwrap();
+            let world = InstancedScene::build(
+                vec![meshes],
+                vec![
+                    Instance::new(0, Affine3A::IDENTITY),
+                    Instance::new(
+                        0,
+                        Affine3A::from_rotation_translation(Quat::from_rotation_y(0.7), Vec3::new(0.5, 0.3, -0.4)),
+                    ),
+                ],
+                &cfg,
+            )
+            .unwrap();
+            let mut per_level = Vec::new();
+            for &l in &levels {
+                set_isa(l).unwrap();
+                assert_eq!(isa(), l);
+                per_level.push((l, answers(&scene, &rays), answers(&world, &rays)));
+            }
+            let (l0, flat0, world0) = &per_level[0];
+            for (l, flat, world) in &per_level[1..] {
+                same(flat0, flat, &format!("{test:?}/{box_test:?} flat, {l0} vs {l}"));
+                same(world0, world, &format!("{test:?}/{box_test:?} instanced, {l0} vs {l}"));
+            }
+            // And the compiled level agrees with brute force (the levels' own checks are the suite's).
+            for (r, h) in rays.iter().zip(&flat0.single).step_by(7) {
+                assert_same_hit(
+                    scene.intersect_brute_force(r),
+                    *h,
+                    2e-5,
+                    &format!("{test:?}/{box_test:?} brute force"),
+                );
+            }
+        }
+    }
+}
