@@ -35,7 +35,7 @@ use crate::geometry::watertight::Watertight;
 use crate::ray::{Hit, HitPacket, Ray, RayPacket};
 use crate::scene::{Query, Scene, each_hit};
 use crate::shapes::SphereSet;
-use crate::simd::{Level, Packet, SimdF, with_level};
+use crate::simd::{Level, Packet, SimdF, hot, with_level};
 
 /// One placement of an object: `object` indexes the objects of the [`InstancedScene`], and
 /// `transform` maps object space to world space.
@@ -711,10 +711,10 @@ fn object_packet<L: Level>(
     let tr = to_object.translation;
     // The operations and their order of glam's `transform_point3` / `transform_vector3` (no fused
     // multiply-add), so a lane is moved exactly as the single-ray query moves it.
-    let row = |a: usize, v: &[L::Pf; 3], with_t: bool| {
+    let row = hot!(|a: usize, v: &[L::Pf; 3], with_t: bool| {
         let x = v[0] * L::Pf::splat(m.x_axis[a]) + v[1] * L::Pf::splat(m.y_axis[a]) + v[2] * L::Pf::splat(m.z_axis[a]);
         if with_t { x + L::Pf::splat(tr[a]) } else { x }
-    };
+    });
     let o = [row(0, &pb.o, true), row(1, &pb.o, true), row(2, &pb.o, true)];
     let d = [row(0, &pb.d, false), row(1, &pb.d, false), row(2, &pb.d, false)];
     let q = RayPacket {

@@ -91,11 +91,8 @@ impl Bvh {
         // frustum bounding them all (`None` unless all share one origin and octant).
         let mut subs = 0u32;
         let mut sf: [Frustum<L>; GROUP] = Default::default();
-        let mut rk: [RayK<L>; GROUP] = std::array::from_fn(|_| RayK {
-            o: [L::Pf::splat(0.0); 3],
-            d: [L::Pf::splat(0.0); 3],
-            tnear: L::Pf::splat(f32::INFINITY),
-        });
+        let none = RayK { o: [L::Pf::splat(0.0); 3], d: [L::Pf::splat(0.0); 3], tnear: L::Pf::splat(f32::INFINITY) };
+        let mut rk: [RayK<L>; GROUP] = [none; GROUP];
         let mut live = [0u32; GROUP];
         let mut tfar = [L::Pf::splat(f32::NEG_INFINITY); GROUP];
         let mut group: Option<Frustum<L>> = None;
@@ -142,9 +139,7 @@ impl Bvh {
                         let p = RayPacket { tfar: tfar[s].to_array(), active: live[s], ..ps[s] };
                         self.trace_packet_from::<false, K, CONS, L>(&p, r, &mut out[s], stack);
                         let hit = out[s].mask;
-                        tfar[s] = L::Pf::new(std::array::from_fn(|l| {
-                            if hit & (1 << l) != 0 { out[s].hit.t[l] } else { p.tfar[l] }
-                        }));
+                        tfar[s] = L::Pf::lane_mask(hit).select(L::Pf::new(out[s].hit.t), L::Pf::new(p.tfar));
                     } else {
                         self.leaf_packet::<false, K, L>(r, &rk[s], rk[s].tnear, live[s], &mut tfar[s], &mut out[s]);
                     }
@@ -171,7 +166,10 @@ pub(crate) fn walk_group<const CONS: bool, L: Level>(
     stack: &mut Stack,
     mut leaf: impl FnMut(u32, u32, bool, &mut [L::Pf; GROUP], &mut Stack),
 ) {
-    let mut tmax: [f32; GROUP] = std::array::from_fn(|i| tfar[i].hmax());
+    let mut tmax = [0.0f32; GROUP];
+    for (m, t) in tmax.iter_mut().zip(tfar.iter()) {
+        *m = t.hmax();
+    }
     let mut tfar_max = tmax.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b));
 
     let base = stack.push_root(root);

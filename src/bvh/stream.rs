@@ -138,7 +138,7 @@ impl Bvh {
             }
             while !is_leaf(cur) {
                 let b = &self.nodes[cur as usize].bounds;
-                let rows = |r: [usize; 3]| [L::Nf::new(b[r[0]]), L::Nf::new(b[r[1]]), L::Nf::new(b[r[2]])];
+                let rows = hot!(|r: [usize; 3]| [L::Nf::new(b[r[0]]), L::Nf::new(b[r[1]]), L::Nf::new(b[r[2]])]);
                 let (bn, bf) = (rows(near), rows(far));
                 // Bit `i` of a child's lane: ray `i` enters it (float bit operations only: the
                 // lanes compared as floats would be denormals, zero under DAZ).

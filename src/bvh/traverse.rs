@@ -135,7 +135,7 @@ impl<'a> PacketHits<'a> {
         sel(&mut h.v, valid, L::Pf::new(from.v));
         let n = [L::Pf::new(from.ng_x), L::Pf::new(from.ng_y), L::Pf::new(from.ng_z)];
         let (x, y, z) = (normal_to_world.x_axis, normal_to_world.y_axis, normal_to_world.z_axis);
-        let row = |a: f32, b: f32, c: f32| L::Pf::splat(a) * n[0] + L::Pf::splat(b) * n[1] + L::Pf::splat(c) * n[2];
+        let row = hot!(|a: f32, b: f32, c: f32| L::Pf::splat(a) * n[0] + L::Pf::splat(b) * n[1] + L::Pf::splat(c) * n[2]);
         sel(&mut h.ng_x, valid, row(x.x, y.x, z.x));
         sel(&mut h.ng_y, valid, row(x.y, y.y, z.y));
         sel(&mut h.ng_z, valid, row(x.z, y.z, z.z));
@@ -482,6 +482,7 @@ impl<L: Level> Default for Frustum<L> {
 impl<L: Level> Frustum<L> {
     /// `None` unless the live lanes share one origin and one direction octant (camera packets).
     /// `tnear` holds `+inf` in the lanes out of the query; `live_mask` selects the live lanes.
+    #[inline(always)]
     fn new(o: &[L::Pf; 3], rdir: &[L::Pf; 3], tnear: L::Pf, live: u32, live_mask: L::Pf) -> Option<Self> {
         let zero = L::Pf::splat(0.0);
         let inf = L::Pf::splat(f32::INFINITY);
@@ -539,14 +540,14 @@ impl<L: Level> Frustum<L> {
 
     /// [`pad`](Self::pad) for origin `o` and reciprocal ranges `rmin..rmax` (finite: the
     /// reciprocals are clamped, and a saturated product stays below `f32::MAX`).
+    #[inline(always)]
     fn pad_of(o: &[L::Nf; 3], rmin: &[L::Nf; 3], rmax: &[L::Nf; 3]) -> f32 {
-        (0..3)
-            .map(|a| {
-                let o = o[a].to_array()[0].abs();
-                (o * rmin[a].to_array()[0].abs().max(rmax[a].to_array()[0].abs())).min(MAX_OD)
-            })
-            .fold(0.0f32, f32::max)
-            * WIDEN
+        let mut pad = 0.0f32;
+        for a in 0..3 {
+            let o = o[a].to_array()[0].abs();
+            pad = pad.max((o * rmin[a].to_array()[0].abs().max(rmax[a].to_array()[0].abs())).min(MAX_OD));
+        }
+        pad * WIDEN
     }
 
     /// Children that some ray of the packet may enter before `tfar_max`, and the lowest entry of each.
@@ -559,8 +560,8 @@ impl<L: Level> Frustum<L> {
     /// [`test`](Self::test) with the mask as a select mask and the distances as a vector.
     #[inline(always)]
     pub(super) fn test_vec<const CONS: bool>(&self, b: &[[f32; WIDTH]; 6], tfar_max: f32) -> (L::Nf, L::Nf) {
-        let pn = |a: usize| L::Nf::new(b[self.near[a]]) - self.o[a];
-        let pf = |a: usize| L::Nf::new(b[self.far[a]]) - self.o[a];
+        let pn = hot!(|a: usize| L::Nf::new(b[self.near[a]]) - self.o[a]);
+        let pf = hot!(|a: usize| L::Nf::new(b[self.far[a]]) - self.o[a]);
         let (pn, pf) = ([pn(0), pn(1), pn(2)], [pf(0), pf(1), pf(2)]);
         let tfar = L::Nf::splat(tfar_max);
         // Exit distances stay float. A product `+0 · r` with `r < 0` is `-0.0`, the smallest value
@@ -568,13 +569,13 @@ impl<L: Level> Frustum<L> {
         // with a plane through the packet's origin would be entered (Sibenik's camera sits on such
         // planes; its primary packets ran at half speed). Entry distances are safe: `-0.0` loses
         // every integer maximum, and `tnear ≥ +0` enters last.
-        let f = |a: usize| (pf[a] * self.rmin[a]).fast_max(pf[a] * self.rmax[a]);
+        let f = hot!(|a: usize| (pf[a] * self.rmin[a]).fast_max(pf[a] * self.rmax[a]));
         let tf = f(0).fast_min(f(1)).fast_min(f(2).fast_min(tfar));
         let tn = if self.int_ok {
-            let n = |a: usize| (pn[a] * self.rmin[a]).min_bits(pn[a] * self.rmax[a]);
+            let n = hot!(|a: usize| (pn[a] * self.rmin[a]).min_bits(pn[a] * self.rmax[a]));
             n(0).max_bits(n(1)).max_bits(n(2).max_bits(self.tnear))
         } else {
-            let n = |a: usize| (pn[a] * self.rmin[a]).fast_min(pn[a] * self.rmax[a]);
+            let n = hot!(|a: usize| (pn[a] * self.rmin[a]).fast_min(pn[a] * self.rmax[a]));
             n(0).fast_max(n(1)).fast_max(n(2).fast_max(self.tnear))
         };
         // Widen by the rounding of the subtraction and product (relative), as in the per-ray test.
@@ -584,6 +585,7 @@ impl<L: Level> Frustum<L> {
     }
 
     /// The frustum bounding both `self` and `other`, if they share the origin and octant.
+    #[inline(always)]
     pub(crate) fn merge(&self, other: &Self) -> Option<Self> {
         if self.near != other.near {
             return None;
@@ -618,7 +620,7 @@ impl<L: Level> Frustum<L> {
     /// distance `d`.
     #[inline(always)]
     pub(super) fn small(&self, b: &[[f32; WIDTH]; 6], d: &[f32; WIDTH]) -> u32 {
-        let ext = |a: usize| L::Nf::new(b[2 * a + 1]) - L::Nf::new(b[2 * a]);
+        let ext = hot!(|a: usize| L::Nf::new(b[2 * a + 1]) - L::Nf::new(b[2 * a]));
         let e = ext(0).fast_max(ext(1)).fast_max(ext(2));
         e.simd_lt(L::Nf::new(*d).abs() * self.spread).to_bitmask()
     }
@@ -978,13 +980,13 @@ impl<L: Level> BoxRay<L> {
     #[inline(always)]
     fn test<const CONS: bool>(&self, node: &Node, tfar: f32) -> (u32, L::Nf) {
         let b = &node.bounds;
-        let near = |a: usize| L::Nf::new(b[self.near[a]]).mul_sub(self.rd[a], self.od[a]);
+        let near = hot!(|a: usize| L::Nf::new(b[self.near[a]]).mul_sub(self.rd[a], self.od[a]));
         let (n0, n1, n2) = (near(0), near(1), near(2));
         let (f0, f1, f2, tf) = if CONS {
-            let far = |a: usize| L::Nf::new(b[self.far[a]]).mul_sub(self.rdf[a], self.odf[a]);
+            let far = hot!(|a: usize| L::Nf::new(b[self.far[a]]).mul_sub(self.rdf[a], self.odf[a]));
             (far(0), far(1), far(2), L::Nf::splat(self.pop_limit::<CONS>(tfar)))
         } else {
-            let far = |a: usize| L::Nf::new(b[self.far[a]]).mul_sub(self.rd[a], self.od[a]);
+            let far = hot!(|a: usize| L::Nf::new(b[self.far[a]]).mul_sub(self.rd[a], self.od[a]));
             (far(0), far(1), far(2), L::Nf::splat(tfar))
         };
         if self.int_ok {
@@ -1108,7 +1110,7 @@ impl<L: Level> PacketBoxes<L> {
         let d = [L::Pf::new(p.dx), L::Pf::new(p.dy), L::Pf::new(p.dz)];
         // `Ray::is_valid` for all lanes at once: comparisons with NaN are false.
         let inf = L::Pf::splat(f32::INFINITY);
-        let finite = |x: L::Pf| x.abs().simd_lt(inf);
+        let finite = hot!(|x: L::Pf| x.abs().simd_lt(inf));
         let (ad, tn, tf) = ([d[0].abs(), d[1].abs(), d[2].abs()], L::Pf::new(p.tnear), L::Pf::new(p.tfar));
         let valid = finite(o[0])
             & finite(o[1])
@@ -1150,12 +1152,12 @@ impl<L: Level> LaneSlabs<L> {
     /// [`SlabTerms::of`] computes for one ray.
     #[inline(always)]
     pub fn of(o: &[L::Pf; 3], d: &[L::Pf; 3]) -> Self {
-        let rcp = |x: L::Pf| {
+        let rcp = hot!(|x: L::Pf| {
             let small = x.abs().simd_lt(L::Pf::splat(MIN_RCP_INPUT));
             L::Pf::splat(1.0) / small.select(L::Pf::splat(MIN_RCP_INPUT).copysign(x), x)
-        };
+        });
         let rd = [rcp(d[0]), rcp(d[1]), rcp(d[2])];
-        let sat = |x: L::Pf| x.fast_max(L::Pf::splat(-MAX_OD)).fast_min(L::Pf::splat(MAX_OD));
+        let sat = hot!(|x: L::Pf| x.fast_max(L::Pf::splat(-MAX_OD)).fast_min(L::Pf::splat(MAX_OD)));
         let od = [sat(o[0] * rd[0]), sat(o[1] * rd[1]), sat(o[2] * rd[2])];
         let pad = od[0].abs().fast_max(od[1].abs()).fast_max(od[2].abs()) * L::Pf::splat(WIDEN);
         Self { rd, od, pad }
@@ -1164,7 +1166,7 @@ impl<L: Level> LaneSlabs<L> {
     /// Lane `l`'s terms.
     #[inline(always)]
     pub fn lane(&self, l: usize) -> SlabTerms {
-        let at = |v: &[L::Pf; 3]| Vec3::new(v[0].to_array()[l], v[1].to_array()[l], v[2].to_array()[l]);
+        let at = hot!(|v: &[L::Pf; 3]| Vec3::new(v[0].to_array()[l], v[1].to_array()[l], v[2].to_array()[l]));
         SlabTerms::from_parts(at(&self.rd), at(&self.od), self.pad.to_array()[l])
     }
 }
@@ -1194,11 +1196,11 @@ impl<L: Level> PacketBoxes<L> {
     /// (`+inf` in the others).
     #[inline(always)]
     fn enter<const CONS: bool>(&self, lo: [f32; 3], hi: [f32; 3], tfar: L::Pf) -> (u32, L::Pf) {
-        let slab = |a: usize| {
+        let slab = hot!(|a: usize| {
             let t0 = L::Pf::splat(lo[a]).mul_sub(self.slabs.rd[a], self.slabs.od[a]);
             let t1 = L::Pf::splat(hi[a]).mul_sub(self.slabs.rd[a], self.slabs.od[a]);
             (t0, t1)
-        };
+        });
         let ((x0, x1), (y0, y1), (z0, z1)) = (slab(0), slab(1), slab(2));
         // Exit distances stay float: an integer minimum may return `-0.0` or a negative value
         // nearer to zero than the true exit, which the widening below could lift above zero (a
@@ -1275,10 +1277,10 @@ pub(crate) fn walk_packet<const ANY: bool, const CONS: bool, L: Level>(
     // per lane `tfar·(1 + w) + pad`, and for the packet's lowest entry the largest of those (the
     // frustum test's relative widening, `(|tn| + |tf|)·w`, lies within twice that).
     let max_pad = if CONS { pb.slabs.pad.hmax().max(pb.frustum.as_ref().map_or(0.0, |f| f.pad)) } else { 0.0 };
-    let pop_limit = |tfar_max: f32, dist: f32| {
+    let pop_limit = hot!(|tfar_max: f32, dist: f32| {
         if CONS { tfar_max + (tfar_max.abs() + dist.abs()) * (2.0 * WIDEN) + max_pad } else { tfar_max }
-    };
-    let lane_limit = |tfar: L::Pf| if CONS { tfar.mul_add(L::Pf::splat(FAR_WIDEN), pb.slabs.pad) } else { tfar };
+    });
+    let lane_limit = hot!(|tfar: L::Pf| if CONS { tfar.mul_add(L::Pf::splat(FAR_WIDEN), pb.slabs.pad) } else { tfar });
     // Camera packets (with a frustum) never switch to single rays; their entries' lane masks are
     // not kept.
     let switch = pb.frustum.is_none();

@@ -60,11 +60,11 @@ impl Kernel for Badouel {
         // Per lane, the ray's components along k, u = k + 1 and v = k + 2.
         let kf = L::F4::new(std::array::from_fn(|l| (b.aux(l) & 3) as f32));
         let (k0, k1) = (kf.simd_eq(L::F4::splat(0.0)), kf.simd_eq(L::F4::splat(1.0)));
-        let sel = |x: L::F4, y: L::F4, z: L::F4| k0.select(x, k1.select(y, z));
+        let sel = hot!(|x: L::F4, y: L::F4, z: L::F4| k0.select(x, k1.select(y, z)));
         let (o, d) = (&r.o, &r.d);
         let (ok, ou, ov) = (sel(o[0], o[1], o[2]), sel(o[1], o[2], o[0]), sel(o[2], o[0], o[1]));
         let (dk, du, dv) = (sel(d[0], d[1], d[2]), sel(d[1], d[2], d[0]), sel(d[2], d[0], d[1]));
-        let row = |i: usize| L::F4::new(b.rows[i]);
+        let row = hot!(|i: usize| L::F4::new(b.rows[i]));
         let (nu, nv, nd) = (row(0), row(1), row(2));
         // Plane first: t and the projected hit point.
         let den = dk + nu * du + nv * dv;
@@ -94,7 +94,7 @@ impl Kernel for Badouel {
     ) -> (L::Pf, L::Pf, L::Pf, L::Pf) {
         let k = ((b.aux(lane) & 3) as usize).min(2);
         let (u, v) = ((k + 1) % 3, (k + 2) % 3);
-        let s = |i: usize| L::Pf::splat(b.rows[i][lane]);
+        let s = hot!(|i: usize| L::Pf::splat(b.rows[i][lane]));
         let den = r.d[k] + s(0) * r.d[u] + s(1) * r.d[v];
         let t = (s(2) - r.o[k] - s(0) * r.o[u] - s(1) * r.o[v]) / den;
         let zero = L::Pf::splat(0.0);

@@ -17,7 +17,7 @@ impl Kernel for Moller {
 
     #[inline(always)]
     fn lanes1<L: Level>(b: &TriBlock, r: &Ray4<L>, _: &(), tnear: f32, tfar: f32) -> Option<BlockHits<L::F4>> {
-        let ld = |k: usize| [L::F4::new(b.rows[k]), L::F4::new(b.rows[k + 1]), L::F4::new(b.rows[k + 2])];
+        let ld = hot!(|k: usize| [L::F4::new(b.rows[k]), L::F4::new(b.rows[k + 1]), L::F4::new(b.rows[k + 2])]);
         let (v0, e1, e2) = (ld(0), ld(3), ld(6));
         // Edge tests: the signs of U and V decide the hit, made independent of the winding by
         // flipping with the sign of the determinant.
@@ -54,9 +54,9 @@ impl Kernel for Moller {
         active: L::Pf,
     ) -> (L::Pf, L::Pf, L::Pf, L::Pf) {
         debug_assert!(lane < BLOCK);
-        let s = |k: usize| {
+        let s = hot!(|k: usize| {
             [L::Pf::splat(b.rows[k][lane]), L::Pf::splat(b.rows[k + 1][lane]), L::Pf::splat(b.rows[k + 2][lane])]
-        };
+        });
         let (v0, e1, e2) = (s(0), s(3), s(6));
         let c = [v0[0] - r.o[0], v0[1] - r.o[1], v0[2] - r.o[2]];
         let rr = cross(c, r.d);

@@ -69,10 +69,13 @@ impl Kernel for Watertight {
     #[inline(always)]
     fn lanes1<L: Level>(b: &TriBlock, r: &Ray4<L>, sh: &Shear, tnear: f32, tfar: f32) -> Option<BlockHits<L::F4>> {
         let [kx, ky, kz] = sh.k;
-        let rel = |first: usize| -> [L::F4; 3] { std::array::from_fn(|a| L::F4::new(b.rows[first + a]) - r.o[a]) };
+        let rel = hot!(|first: usize| -> [L::F4; 3] {
+            let p = hot!(|a: usize| L::F4::new(b.rows[first + a]) - r.o[a]);
+            [p(0), p(1), p(2)]
+        });
         let (a, bb, c) = (rel(0), rel(3), rel(6));
         let (sx, sy, sz) = (L::F4::splat(sh.s[0]), L::F4::splat(sh.s[1]), L::F4::splat(sh.s[2]));
-        let shear = |p: &[L::F4; 3]| (p[kx] - sx * p[kz], p[ky] - sy * p[kz]);
+        let shear = hot!(|p: &[L::F4; 3]| (p[kx] - sx * p[kz], p[ky] - sy * p[kz]));
         let ((ax, ay), (bx, by), (cx, cy)) = (shear(&a), shear(&bb), shear(&c));
         let mut u = cx * by - cy * bx;
         let mut v = ax * cy - ay * cx;
@@ -81,7 +84,7 @@ impl Kernel for Watertight {
         // Exactly-zero edge functions: recompute those lanes in float64.
         let zeros = (u.simd_eq(zero) | v.simd_eq(zero) | w.simd_eq(zero)).to_bitmask();
         if zeros != 0 {
-            let g = |x: L::F4| x.to_array();
+            let g = hot!(|x: L::F4| x.to_array());
             let (ua, va, wa) = edges_f64(zeros, [g(u), g(v), g(w)], [g(ax), g(ay), g(bx), g(by), g(cx), g(cy)]);
             (u, v, w) = (L::F4::new(ua), L::F4::new(va), L::F4::new(wa));
         }
@@ -122,22 +125,23 @@ impl Kernel for Watertight {
         let zx = ad[0].simd_ge(ad[1]) & ad[0].simd_ge(ad[2]);
         let zy = !zx & ad[1].simd_ge(ad[2]);
         // Components along kz, kz + 1 and kz + 2, then kx/ky swapped where d[kz] < 0.
-        let perm = |p: &[L::Pf; 3]| -> [L::Pf; 3] {
+        let perm = hot!(|p: &[L::Pf; 3]| -> [L::Pf; 3] {
             let z = zx.select(p[0], zy.select(p[1], p[2]));
             let x = zx.select(p[1], zy.select(p[2], p[0]));
             let y = zx.select(p[2], zy.select(p[0], p[1]));
             [x, y, z]
-        };
+        });
         let [dx0, dy0, dz] = perm(d);
         let neg = dz.simd_lt(zero);
-        let swap = |p: [L::Pf; 3]| [neg.select(p[1], p[0]), neg.select(p[0], p[1]), p[2]];
+        let swap = hot!(|p: [L::Pf; 3]| [neg.select(p[1], p[0]), neg.select(p[0], p[1]), p[2]]);
         let [dx, dy, _] = swap([dx0, dy0, dz]);
         let (sx, sy, sz) = (dx / dz, dy / dz, L::Pf::splat(1.0) / dz);
-        let rel = |first: usize| -> [L::Pf; 3] {
-            swap(perm(&std::array::from_fn(|a| L::Pf::splat(b.rows[first + a][lane]) - r.o[a])))
-        };
+        let rel = hot!(|first: usize| -> [L::Pf; 3] {
+            let p = hot!(|a: usize| L::Pf::splat(b.rows[first + a][lane]) - r.o[a]);
+            swap(perm(&[p(0), p(1), p(2)]))
+        });
         let (a, bb, c) = (rel(0), rel(3), rel(6));
-        let shear = |p: &[L::Pf; 3]| (p[0] - sx * p[2], p[1] - sy * p[2]);
+        let shear = hot!(|p: &[L::Pf; 3]| (p[0] - sx * p[2], p[1] - sy * p[2]));
         let ((ax, ay), (bx, by), (cx, cy)) = (shear(&a), shear(&bb), shear(&c));
         let mut u = cx * by - cy * bx;
         let mut v = ax * cy - ay * cx;
@@ -145,7 +149,7 @@ impl Kernel for Watertight {
         // Exactly-zero edge functions: recompute those lanes in float64, as the single-ray form.
         let zeros = (active & (u.simd_eq(zero) | v.simd_eq(zero) | w.simd_eq(zero))).to_bitmask();
         if zeros != 0 {
-            let g = |x: L::Pf| x.to_array();
+            let g = hot!(|x: L::Pf| x.to_array());
             let (ua, va, wa) = edges_f64(zeros, [g(u), g(v), g(w)], [g(ax), g(ay), g(bx), g(by), g(cx), g(cy)]);
             (u, v, w) = (L::Pf::new(ua), L::Pf::new(va), L::Pf::new(wa));
         }

@@ -21,6 +21,25 @@ use wide::i32x16;
 pub(crate) use wide::{bytemuck, i32x8};
 pub(crate) use wide::{f32x4, f32x8, f32x16};
 
+/// Returns its argument: lets a closure bound to a name carry `#[inline(always)]` (see [`hot!`](hot)).
+#[inline(always)]
+pub(crate) fn hot_fn<F>(f: F) -> F {
+    f
+}
+
+/// A closure that is always inlined: `let f = hot!(|x| …);`. Closures in the kernels must be, so
+/// that they are compiled inside the level's `#[target_feature]` function: one left out of line
+/// is compiled for the crate's own target, where the level's lane operations become calls.
+macro_rules! hot {
+    ($c:expr) => {
+        $crate::simd::hot_fn(
+            #[inline(always)]
+            $c,
+        )
+    };
+}
+pub(crate) use hot;
+
 /// Asks the processor to bring the cache lines of `*p` (up to 256 bytes) into the L1 cache: a hint
 /// that does not change what the program computes.
 #[inline(always)]
@@ -102,11 +121,8 @@ macro_rules! bit_order {
 bit_order!(f32x8, i32x8, 8);
 bit_order!(f32x16, i32x16, 16);
 
-/// One lane per child of a BVH node ([`WIDTH`](crate::bvh::node::WIDTH) lanes). With `WIDTH`
-/// these two types choose the node width (16 with `f32x16`/`i32x16` ran 4–15% slower, see
-/// PERFORMANCE.md).
-pub(crate) type Nf = f32x8;
-/// [`Nf`]'s integer twin.
+/// Integer lanes, one per child of a BVH node ([`WIDTH`](crate::bvh::node::WIDTH) lanes; the
+/// float ones are each level's [`Level::Nf`]). 16 lanes per node ran 4–15% slower (PERFORMANCE.md).
 pub(crate) type Ni = i32x8;
 
 /// Fused multiply-add on lane vectors: `madd(a, b, c) = a·b + c`, `msub(a, b, c) = a·b − c`, one
@@ -129,8 +145,7 @@ impl<T: SimdF> Fma for T {
 
 /// The lane operations the triangle and box kernels are written against, once for every level
 /// ([`Level`]) and width: `wide`'s names and meanings (comparisons return masks with all bits
-/// set in the lanes where they hold; `max`/`min` return `self` where `b` is NaN, `fast_max`/
-/// `fast_min` are the bare instructions), so that the compiled level's code is `wide`'s own.
+/// set in the lanes where they hold; `fast_max`/`fast_min` are the bare `maxps`/`minps`), so that the compiled level's code is `wide`'s own.
 pub(crate) trait SimdF:
     Copy
     + Send
@@ -154,13 +169,8 @@ pub(crate) trait SimdF:
     fn new(a: Self::Arr) -> Self;
     fn to_array(self) -> Self::Arr;
     fn abs(self) -> Self;
-    fn sqrt(self) -> Self;
     /// `self` with the sign of `s`.
     fn copysign(self, s: Self) -> Self;
-    /// The larger lane; `self` where `b` is NaN.
-    fn max(self, b: Self) -> Self;
-    /// The smaller lane; `self` where `b` is NaN.
-    fn min(self, b: Self) -> Self;
     /// `maxps`: `b` where either is NaN.
     fn fast_max(self, b: Self) -> Self;
     /// `minps`: `b` where either is NaN.
@@ -176,8 +186,6 @@ pub(crate) trait SimdF:
     fn select(self, t: Self, f: Self) -> Self;
     /// The lanes' sign bits, lane 0 lowest.
     fn to_bitmask(self) -> u32;
-    fn any(self) -> bool;
-    fn all(self) -> bool;
     /// `self·b + c`, fused where the level has FMA.
     fn mul_add(self, b: Self, c: Self) -> Self;
     /// `self·b − c`, fused where the level has FMA.

@@ -26,20 +26,8 @@ macro_rules! simd_f {
                 <$t>::abs(self)
             }
             #[inline(always)]
-            fn sqrt(self) -> Self {
-                <$t>::sqrt(self)
-            }
-            #[inline(always)]
             fn copysign(self, s: Self) -> Self {
                 <$t>::copysign(self, s)
-            }
-            #[inline(always)]
-            fn max(self, b: Self) -> Self {
-                <$t>::max(self, b)
-            }
-            #[inline(always)]
-            fn min(self, b: Self) -> Self {
-                <$t>::min(self, b)
             }
             #[inline(always)]
             fn fast_max(self, b: Self) -> Self {
@@ -80,14 +68,6 @@ macro_rules! simd_f {
             #[inline(always)]
             fn to_bitmask(self) -> u32 {
                 <$t>::to_bitmask(self)
-            }
-            #[inline(always)]
-            fn any(self) -> bool {
-                <$t>::any(self)
-            }
-            #[inline(always)]
-            fn all(self) -> bool {
-                <$t>::all(self)
             }
             #[inline(always)]
             fn mul_add(self, b: Self, c: Self) -> Self {

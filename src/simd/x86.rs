@@ -12,8 +12,7 @@
 //! `#[target_feature]` function and become single instructions there.
 //!
 //! The lanes mean what `wide`'s do: comparisons give all bits set where they hold (ordered,
-//! except `!=`), `max`/`min` keep `self` where `b` is NaN, `fast_max`/`fast_min` are the bare
-//! `maxps`/`minps`.
+//! except `!=`), `fast_max`/`fast_min` are the bare `maxps`/`minps`.
 #![allow(unused_unsafe)]
 
 use core::arch::x86_64::*;
@@ -135,7 +134,7 @@ binops!(V16, _mm512_add_ps, _mm512_sub_ps, _mm512_mul_ps, _mm512_div_ps, _mm512_
 
 /// The methods V4 and V8 share: vector masks, `blendv`, `movemask`.
 macro_rules! vector_mask_lanes {
-    ($t:ident, $n:expr, $set1:ident, $loadu:ident, $storeu:ident, $sqrt:ident, $max:ident, $min:ident,
+    ($t:ident, $n:expr, $set1:ident, $loadu:ident, $storeu:ident, $max:ident, $min:ident,
      $cmp:ident, $blendv:ident, $movemask:ident, $fmadd:ident, $fmsub:ident) => {
         impl $t {
             #[inline(always)]
@@ -166,21 +165,9 @@ macro_rules! vector_mask_lanes {
                 self & Self::splat(f32::from_bits(i32::MAX as u32))
             }
             #[inline(always)]
-            fn sqrt(self) -> Self {
-                $t(isa!($sqrt(self.0)))
-            }
-            #[inline(always)]
             fn copysign(self, s: Self) -> Self {
                 let sign = Self::splat(-0.0);
                 (s & sign) | (self & !sign)
-            }
-            #[inline(always)]
-            fn max(self, b: Self) -> Self {
-                b.cmp::<_CMP_UNORD_Q>(b).select(self, self.fast_max(b))
-            }
-            #[inline(always)]
-            fn min(self, b: Self) -> Self {
-                b.cmp::<_CMP_UNORD_Q>(b).select(self, self.fast_min(b))
             }
             #[inline(always)]
             fn fast_max(self, b: Self) -> Self {
@@ -223,14 +210,6 @@ macro_rules! vector_mask_lanes {
                 isa!($movemask(self.0)) as u32
             }
             #[inline(always)]
-            fn any(self) -> bool {
-                self.to_bitmask() != 0
-            }
-            #[inline(always)]
-            fn all(self) -> bool {
-                self.to_bitmask() == (1u32 << $n) - 1
-            }
-            #[inline(always)]
             fn mul_add(self, b: Self, c: Self) -> Self {
                 $t(isa!($fmadd(self.0, b.0, c.0)))
             }
@@ -248,7 +227,6 @@ vector_mask_lanes!(
     _mm_set1_ps,
     _mm_loadu_ps,
     _mm_storeu_ps,
-    _mm_sqrt_ps,
     _mm_max_ps,
     _mm_min_ps,
     _mm_cmp_ps,
@@ -263,7 +241,6 @@ vector_mask_lanes!(
     _mm256_set1_ps,
     _mm256_loadu_ps,
     _mm256_storeu_ps,
-    _mm256_sqrt_ps,
     _mm256_max_ps,
     _mm256_min_ps,
     _mm256_cmp_ps,
@@ -399,18 +376,17 @@ impl SimdF for W16 {
     }
     #[inline(always)]
     fn to_array(self) -> Self::Arr {
-        let (lo, hi) = (self.0.to_array(), self.1.to_array());
-        core::array::from_fn(|i| if i < 8 { lo[i] } else { hi[i - 8] })
+        let mut a = [0.0; 16];
+        let (lo, hi) = a.split_at_mut(8);
+        lo.copy_from_slice(&self.0.to_array());
+        hi.copy_from_slice(&self.1.to_array());
+        a
     }
     #[inline(always)]
     fn abs(self) -> Self {
         W16(self.0.abs(), self.1.abs())
     }
-    #[inline(always)]
-    fn sqrt(self) -> Self {
-        W16(self.0.sqrt(), self.1.sqrt())
-    }
-    halves!(copysign, max, min, fast_max, fast_min, simd_lt, simd_le, simd_gt, simd_ge, simd_eq, simd_ne);
+    halves!(copysign, fast_max, fast_min, simd_lt, simd_le, simd_gt, simd_ge, simd_eq, simd_ne);
     #[inline(always)]
     fn select(self, t: Self, f: Self) -> Self {
         W16(self.0.select(t.0, f.0), self.1.select(t.1, f.1))
@@ -418,14 +394,6 @@ impl SimdF for W16 {
     #[inline(always)]
     fn to_bitmask(self) -> u32 {
         self.0.to_bitmask() | self.1.to_bitmask() << 8
-    }
-    #[inline(always)]
-    fn any(self) -> bool {
-        (self.0 | self.1).any()
-    }
-    #[inline(always)]
-    fn all(self) -> bool {
-        (self.0 & self.1).all()
     }
     #[inline(always)]
     fn mul_add(self, b: Self, c: Self) -> Self {
@@ -506,21 +474,9 @@ impl SimdF for V16 {
         self & Self::splat(f32::from_bits(i32::MAX as u32))
     }
     #[inline(always)]
-    fn sqrt(self) -> Self {
-        V16(isa!(_mm512_sqrt_ps(self.0)))
-    }
-    #[inline(always)]
     fn copysign(self, s: Self) -> Self {
         let sign = Self::splat(-0.0);
         (s & sign) | (self & !sign)
-    }
-    #[inline(always)]
-    fn max(self, b: Self) -> Self {
-        b.cmp::<_CMP_UNORD_Q>(b).select(self, self.fast_max(b))
-    }
-    #[inline(always)]
-    fn min(self, b: Self) -> Self {
-        b.cmp::<_CMP_UNORD_Q>(b).select(self, self.fast_min(b))
     }
     #[inline(always)]
     fn fast_max(self, b: Self) -> Self {
@@ -561,14 +517,6 @@ impl SimdF for V16 {
     #[inline(always)]
     fn to_bitmask(self) -> u32 {
         self.mask() as u32
-    }
-    #[inline(always)]
-    fn any(self) -> bool {
-        self.mask() != 0
-    }
-    #[inline(always)]
-    fn all(self) -> bool {
-        self.mask() == 0xffff
     }
     #[inline(always)]
     fn mul_add(self, b: Self, c: Self) -> Self {
