@@ -244,9 +244,15 @@ unsafe impl Send for Device {}
 unsafe impl Sync for Device {}
 
 impl Device {
-    /// A device with Embree's configuration string, e.g. `"threads=2"`.
+    /// A device with Embree's configuration string, e.g. `"threads=2"`. The environment variable
+    /// `EMBREE_ISA` (`sse2`, `sse4.2`, `avx`, `avx2`, `avx512`) adds Embree's `isa=` setting, so
+    /// that Embree can be held to the instruction set strahl is forced to (`STRAHL_ISA`).
     pub fn new(config: &str) -> anyhow::Result<Self> {
-        let c = CString::new(config)?;
+        let config = match std::env::var("EMBREE_ISA") {
+            Ok(isa) if !isa.trim().is_empty() => format!("{config},isa={}", isa.trim()),
+            _ => config.to_string(),
+        };
+        let c = CString::new(config.as_str())?;
         // SAFETY: `c` is a valid NUL-terminated string that outlives the call.
         let raw = unsafe { rtcNewDevice(c.as_ptr()) };
         if raw.is_null() {

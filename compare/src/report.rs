@@ -270,7 +270,7 @@ pub(crate) fn machine() -> String {
         })
         .unwrap_or_else(|| "unknown CPU".into());
     let cores = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(0);
-    format!("{cpu}, {cores} cores visible")
+    format!("{cpu}, {cores} cores visible, strahl kernels: {}", strahl::isa())
 }
 
 pub(crate) fn commit() -> String {

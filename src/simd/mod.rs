@@ -1,10 +1,12 @@
 //! The one place that names SIMD lane types and touches processor state.
 //!
-//! Every other module imports its lane types from here, so that switching the lane library or the
-//! packet width is a change to this file alone. The kernels are written against `wide`, which turns
-//! `f32x8`/`f32x16` into AVX2/AVX-512 instructions when the crate is built with the CPU's features
-//! (`.cargo/config.toml` sets `-C target-cpu=native`); without them they fall back to narrower code
-//! that gives the same answers.
+//! Every other module imports its lane types from here. The triangle and box kernels are written
+//! once against the lane traits ([`SimdF`], [`Four`], [`Packet`], [`BitOrder`]) and are generic
+//! over an instruction-set [`Level`] (see `level.rs`): `wide`'s types as the crate is compiled
+//! (AVX-512 or AVX2 with the repository's `-C target-cpu=native`, SSE2 in a default build), or
+//! `core::arch` vectors for AVX2 and AVX-512 chosen at run time (`x86.rs`), so that a crate
+//! depending on strahl runs the wide kernels without any compiler flags. The shapes' kernels use
+//! `wide` directly ([`Lanes`]).
 #![allow(unsafe_code)]
 
 mod level;
