@@ -135,7 +135,8 @@ impl<'a> PacketHits<'a> {
         sel(&mut h.v, valid, L::Pf::new(from.v));
         let n = [L::Pf::new(from.ng_x), L::Pf::new(from.ng_y), L::Pf::new(from.ng_z)];
         let (x, y, z) = (normal_to_world.x_axis, normal_to_world.y_axis, normal_to_world.z_axis);
-        let row = hot!(|a: f32, b: f32, c: f32| L::Pf::splat(a) * n[0] + L::Pf::splat(b) * n[1] + L::Pf::splat(c) * n[2]);
+        let row =
+            hot!(|a: f32, b: f32, c: f32| L::Pf::splat(a) * n[0] + L::Pf::splat(b) * n[1] + L::Pf::splat(c) * n[2]);
         sel(&mut h.ng_x, valid, row(x.x, y.x, z.x));
         sel(&mut h.ng_y, valid, row(x.y, y.y, z.y));
         sel(&mut h.ng_z, valid, row(x.z, y.z, z.z));
