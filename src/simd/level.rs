@@ -336,6 +336,106 @@ pub(crate) use with_level;
 mod tests {
     use super::*;
 
+    /// Awkward inputs: signed zeros, infinities, NaN, denormal-sized and huge values.
+    const VALUES: [f32; 16] = [
+        0.0,
+        -0.0,
+        1.0,
+        -1.5,
+        3.25,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        f32::NAN,
+        1e-30,
+        -1e30,
+        7.0,
+        0.5,
+        -2.0,
+        2.0,
+        1e20,
+        -0.25,
+    ];
+
+    /// Every lane operation of level `L` on rotations of [`VALUES`], as result bits (NaNs
+    /// collapsed to one pattern: the operations may differ in NaN payloads).
+    fn bits(x: f32) -> u32 {
+        if x.is_nan() { 0x7fc0_0000 } else { x.to_bits() }
+    }
+
+    fn put<V: SimdF>(out: &mut Vec<u32>, v: V) {
+        out.extend(v.to_array().as_ref().iter().map(|&x| bits(x)));
+    }
+
+    fn lane_results<L: Level>() -> Vec<u32> {
+        let mut out = Vec::new();
+        for shift in 0..16 {
+            let a: [f32; 16] = core::array::from_fn(|i| VALUES[(i + shift) % 16]);
+            let b: [f32; 16] = core::array::from_fn(|i| VALUES[(i * 7 + shift + 3) % 16]);
+            let c: [f32; 16] = core::array::from_fn(|i| VALUES[(i * 5 + shift + 1) % 16]);
+            let (x, y, z) = (L::Pf::new(a), L::Pf::new(b), L::Pf::new(c));
+            put(&mut out, x + y);
+            put(&mut out, x - y);
+            put(&mut out, x * y);
+            put(&mut out, x / y);
+            put(&mut out, -x);
+            put(&mut out, x.abs());
+            put(&mut out, x.copysign(y));
+            put(&mut out, x.fast_min(y));
+            put(&mut out, x.fast_max(y));
+            for m in [x.simd_lt(y), x.simd_le(y), x.simd_gt(y), x.simd_ge(y), x.simd_eq(y), x.simd_ne(y)] {
+                put(&mut out, m);
+                put(&mut out, m.select(x, y));
+                put(&mut out, !m & x);
+                put(&mut out, m | (x ^ y));
+                out.push(m.to_bitmask());
+            }
+            if L::FMA && Native::FMA {
+                put(&mut out, x.mul_add(y, z));
+                put(&mut out, x.mul_sub(y, z));
+            }
+            put(&mut out, x.max_bits(y));
+            put(&mut out, x.min_bits(y));
+            put(&mut out, x.le_mask(y));
+            out.push(x.le_bits(y));
+            put(&mut out, L::Pf::lane_mask(0xa5c3 >> (shift % 4)));
+            let finite = x.simd_lt(L::Pf::splat(f32::INFINITY)) & x.simd_gt(L::Pf::splat(f32::NEG_INFINITY));
+            let finite = finite & x.simd_eq(x);
+            out.push(bits(finite.select(x, L::Pf::splat(1.0)).hmin()));
+            out.push(bits(finite.select(x, L::Pf::splat(1.0)).hmax()));
+            let (n8, m8) = (L::Nf::new(a[..8].try_into().unwrap()), L::Nf::new(b[8..].try_into().unwrap()));
+            out.extend((n8.mul_sub(m8, n8) * m8).to_array().map(bits).iter().take(if L::FMA && Native::FMA {
+                8
+            } else {
+                0
+            }));
+            out.extend(n8.max_bits(m8).to_array().map(bits));
+            out.extend(n8.min_bits(m8).to_array().map(bits));
+            out.push(n8.le_bits(m8));
+            out.push(n8.simd_le(m8).to_bitmask());
+            let f4 = L::F4::new(a[..4].try_into().unwrap());
+            let finite4 = f4.simd_lt(L::F4::splat(f32::INFINITY)) & f4.simd_eq(f4);
+            let f4 = finite4.select(f4, L::F4::splat(9.0));
+            out.push(bits(f4.min4()));
+            out.extend((0..4).map(|l| bits(f4.lane4(l))));
+        }
+        out
+    }
+
+    #[test]
+    fn every_level_computes_what_wide_computes() {
+        let native = lane_results::<Native>();
+        #[cfg(target_arch = "x86_64")]
+        {
+            if Isa::Avx2.supported() {
+                assert_eq!(Avx2::call(lane_results::<Avx2>), native, "avx2");
+            }
+            if Isa::Avx512.supported() {
+                assert_eq!(Avx512::call(lane_results::<Avx512>), native, "avx512");
+            }
+        }
+        assert!(native.len() > 1000);
+    }
+
     #[test]
     fn names_round_trip_and_the_best_level_is_supported() {
         for i in Isa::ALL {
