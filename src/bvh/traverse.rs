@@ -652,18 +652,28 @@ impl Bvh {
     /// The closest hit by testing every block, with this BVH's triangle test.
     pub fn brute_force(&self, ray: &Ray) -> Option<LeafHit> {
         match self.test {
-            TriangleTest::MollerTrumbore => self.brute_force_k::<Moller>(ray),
-            TriangleTest::Badouel => self.brute_force_k::<Badouel>(ray),
-            TriangleTest::Watertight => self.brute_force_k::<Watertight>(ray),
+            TriangleTest::MollerTrumbore => with_level!(|L| L::call(
+                #[inline(always)]
+                || self.brute_force_k::<Moller, L>(ray)
+            )),
+            TriangleTest::Badouel => with_level!(|L| L::call(
+                #[inline(always)]
+                || self.brute_force_k::<Badouel, L>(ray)
+            )),
+            TriangleTest::Watertight => with_level!(|L| L::call(
+                #[inline(always)]
+                || self.brute_force_k::<Watertight, L>(ray)
+            )),
         }
     }
 
-    fn brute_force_k<K: Kernel>(&self, ray: &Ray) -> Option<LeafHit> {
+    #[inline(always)]
+    fn brute_force_k<K: Kernel, L: Level>(&self, ray: &Ray) -> Option<LeafHit> {
         if !ray.is_valid() {
             return None;
         }
         let ray = &ray.clamped_to_zero();
-        let r4 = Ray4::<Native>::new(ray.origin, ray.dir);
+        let r4 = Ray4::<L>::new(ray.origin, ray.dir);
         let pre = K::pre(&r4);
         let mut tfar = ray.tfar;
         let mut best = None;

@@ -239,8 +239,10 @@ pub(crate) fn dot<T: Fma>(a: [T; 3], b: [T; 3]) -> T {
 /// compute it (used to measure per-triangle behaviour, e.g. double hits on shared edges).
 pub fn intersect_triangle(test: TriangleTest, ray: &crate::ray::Ray, tri: [Vec3; 3]) -> Option<(f32, f32, f32)> {
     use super::{badouel::Badouel, moeller::Moller, watertight::Watertight};
-    fn run<K: Kernel>(b: &TriBlock, ray: &crate::ray::Ray) -> Option<(f32, f32, f32)> {
-        let r = Ray4::<Native>::new(ray.origin, ray.dir);
+    // With the kernels' active level, as the walks compute it.
+    #[inline(always)]
+    fn run<K: Kernel, L: Level>(b: &TriBlock, ray: &crate::ray::Ray) -> Option<(f32, f32, f32)> {
+        let r = Ray4::<L>::new(ray.origin, ray.dir);
         K::intersect1(b, &r, &K::pre(&r), ray.tnear, ray.tfar).map(|(_, t, u, v)| (t, u, v))
     }
     if !ray.is_valid() {
@@ -248,9 +250,18 @@ pub fn intersect_triangle(test: TriangleTest, ray: &crate::ray::Ray, tri: [Vec3;
     }
     let b = TriBlock::new(test, &[(0, 0, tri)]);
     match test {
-        TriangleTest::MollerTrumbore => run::<Moller>(&b, ray),
-        TriangleTest::Badouel => run::<Badouel>(&b, ray),
-        TriangleTest::Watertight => run::<Watertight>(&b, ray),
+        TriangleTest::MollerTrumbore => with_level!(|L| L::call(
+            #[inline(always)]
+            || run::<Moller, L>(&b, ray)
+        )),
+        TriangleTest::Badouel => with_level!(|L| L::call(
+            #[inline(always)]
+            || run::<Badouel, L>(&b, ray)
+        )),
+        TriangleTest::Watertight => with_level!(|L| L::call(
+            #[inline(always)]
+            || run::<Watertight, L>(&b, ray)
+        )),
     }
 }
 
