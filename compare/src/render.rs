@@ -120,7 +120,7 @@ impl EmbreeBackend {
         solids: &[Vec<strahl::Solid>],
         instances: &[Instance],
     ) -> anyhow::Result<Self> {
-        let device = Device::new("threads=2")?;
+        let device = Device::new(render_device_config())?;
         let xfms: Vec<(usize, [f32; 12])> = instances.iter().map(|i| (i.object, column_major(&i.transform))).collect();
         let prepared = solids
             .iter()
@@ -531,4 +531,18 @@ pub fn table(rows: &[RenderRow], threads: usize, passes: usize) -> String {
     }
     s.push('\n');
     s
+}
+
+/// The Embree device configuration of the render backend: `threads=2`, and on AMD Zen 5 (family
+/// 26) `isa=avx2` unless `EMBREE_ISA` says otherwise. Embree 3.13.5's AVX-512 code hung there in
+/// the render backend (measured 2026-11-27 on an AMD EPYC family 26: the Whitted frame spun in
+/// libembree3 for over an hour; with `isa=avx2` it rendered in 3.8 s); the kernel harness's AVX-512
+/// queries ran normally on the same machine.
+fn render_device_config() -> &'static str {
+    let zen5 = std::env::var_os("EMBREE_ISA").is_none()
+        && std::fs::read_to_string("/proc/cpuinfo").is_ok_and(|c| {
+            c.contains("AuthenticAMD")
+                && c.lines().any(|l| l.starts_with("cpu family") && l.trim_end().ends_with(": 26"))
+        });
+    if zen5 { "threads=2,isa=avx2" } else { "threads=2" }
 }
