@@ -424,7 +424,7 @@ impl InstancedScene {
                     }
                     let spheres = object.sphere_tree();
                     if !spheres.is_empty()
-                        && let Some(h) = spheres.trace1_on::<ANY, CONS>(&Ray { tfar: *tfar, ..r }, stack)
+                        && let Some(h) = spheres.trace1_on::<ANY, CONS, L>(&Ray { tfar: *tfar, ..r }, stack)
                     {
                         *tfar = h.t;
                         best = Some((k as u32, ObjHit::Sphere(p.sphere_hit(h))));
@@ -551,7 +551,7 @@ impl InstancedScene {
                                 }
                                 let bounded = Ray { tfar: tri.map_or(ray.tfar, |h| h.t), ..*ray };
                                 let sphere =
-                                    spheres.trace1_on::<false, CONS>(&bounded, stack).map(|h| pl.sphere_hit(h));
+                                    spheres.trace1_on::<false, CONS, L>(&bounded, stack).map(|h| pl.sphere_hit(h));
                                 let near = sphere.or(tri);
                                 let bounded = Ray { tfar: near.map_or(ray.tfar, |h| h.t), ..*ray };
                                 let solid = solids.trace1_on::<false, CONS>(&bounded, stack).map(|h| pl.sphere_hit(h));
@@ -571,7 +571,7 @@ impl InstancedScene {
                         } else {
                             let bounded = RayPacket { tfar: tfar.to_array(), ..q };
                             let m = if part == 1 {
-                                spheres.trace_packet_on::<ANY, CONS>(&bounded, &mut r, stack)
+                                spheres.trace_packet_on::<ANY, CONS, L>(&bounded, &mut r, stack)
                             } else {
                                 solids.trace_packet_on::<ANY, CONS>(&bounded, &mut r, stack)
                             };

@@ -1,6 +1,7 @@
 //! Every instruction-set level this machine runs answers every query like the others: the same
 //! hits, with distances that differ by float rounding only (fused against separate multiply-adds where the crate is compiled without FMA),
-//! for every triangle test and box test, flat and instanced, single rays, packets and streams.
+//! for every triangle test and box test, flat and instanced, single rays, packets and streams;
+//! and the same for analytic spheres with every sphere test.
 //!
 //! This file is its own test binary (its own process), so switching the level with
 //! `strahl::simd::set_isa` cannot disturb other tests. The whole suite also runs once per level
@@ -10,12 +11,15 @@ mod common;
 
 use common::{assert_same_hit, random_rays, random_soup};
 use glam::{Affine3A, Quat, Vec3};
-use strahl::procedural::uv_sphere;
+use strahl::procedural::{self, uv_sphere};
 use strahl::simd::{Isa, isa, set_isa};
 use strahl::{
     BoxTest, BuildConfig, Coherence, Hit, HitStream, Instance, InstancedScene, Query, Ray, RayPacket, RayStream, Scene,
-    TriangleTest,
+    SphereSet, SphereTest, TriangleTest,
 };
+
+/// The level is one setting for the whole process: the tests here take turns.
+static LEVEL: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 /// Every answer a scene gives for `rays`, through each query shape.
 struct Answers {
@@ -79,6 +83,7 @@ fn same(a: &Answers, b: &Answers, what: &str) {
 
 #[test]
 fn every_level_answers_like_the_compiled_one() {
+    let _turn = LEVEL.lock().unwrap_or_else(|e| e.into_inner());
     let levels: Vec<Isa> = Isa::ALL.into_iter().filter(|i| i.supported()).collect();
     for i in Isa::ALL {
         assert_eq!(set_isa(i).is_ok(), i.supported(), "{i}");
@@ -119,6 +124,69 @@ fn every_level_answers_like_the_compiled_one() {
             }
             // And the compiled level agrees with brute force (the levels' own checks are the suite's).
             for (r, h) in rays.iter().zip(&flat0.single).step_by(7) {
+                assert_same_hit(
+                    scene.intersect_brute_force(r),
+                    *h,
+                    2e-5,
+                    &format!("{test:?}/{box_test:?} brute force"),
+                );
+            }
+        }
+    }
+}
+
+/// Analytic spheres (a sphereflake and two overlapping spheres beside a mesh), flat and
+/// instanced, with every sphere test and box test: every level answers like the first.
+#[test]
+fn every_level_answers_like_the_compiled_one_on_spheres() {
+    let _turn = LEVEL.lock().unwrap_or_else(|e| e.into_inner());
+    let levels: Vec<Isa> = Isa::ALL.into_iter().filter(|i| i.supported()).collect();
+    let mut rays = random_rays(72, 2000);
+    for k in 0..1024 {
+        let (x, y) = ((k % 32) as f32 / 16.0 - 1.0, (k / 32) as f32 / 16.0 - 1.0);
+        rays.push(Ray::new(Vec3::new(0.0, 0.3, 4.0), Vec3::new(x, y, -3.0)));
+    }
+    for test in SphereTest::ALL {
+        for box_test in [BoxTest::Conservative, BoxTest::Fast] {
+            let cfg = BuildConfig { sphere_test: test, box_test, ..BuildConfig::default() };
+            let sets = || {
+                vec![
+                    SphereSet::from_pairs("flake", &procedural::sphereflake_spheres(3)).unwrap(),
+                    SphereSet::new("pair", vec![Vec3::new(-0.9, 0.0, 0.3), Vec3::new(-0.7, 0.3, 0.0)], vec![0.4, 0.2])
+                        .unwrap(),
+                ]
+            };
+            let mesh = || vec![uv_sphere(Vec3::new(1.2, 0.0, 0.0), 0.3, 12, 24)];
+            let scene = Scene::build_with_spheres(mesh(), sets(), &cfg).unwrap();
+            let world = InstancedScene::from_scenes(
+                vec![Scene::build_with_spheres(mesh(), sets(), &cfg).unwrap()],
+                vec![
+                    Instance::new(0, Affine3A::IDENTITY),
+                    Instance::new(
+                        0,
+                        Affine3A::from_scale_rotation_translation(
+                            Vec3::splat(0.5),
+                            Quat::from_rotation_y(0.7),
+                            Vec3::new(0.5, 0.3, -0.4),
+                        ),
+                    ),
+                ],
+            )
+            .unwrap();
+            let mut per_level = Vec::new();
+            for &l in &levels {
+                set_isa(l).unwrap();
+                assert_eq!(isa(), l);
+                per_level.push((l, answers(&scene, &rays), answers(&world, &rays)));
+            }
+            let (l0, flat0, world0) = &per_level[0];
+            let sphere_hits = flat0.single.iter().flatten().filter(|h| h.geom_id >= 1).count();
+            assert!(sphere_hits > rays.len() / 10, "{test:?}: only {sphere_hits} sphere hits");
+            for (l, flat, world) in &per_level[1..] {
+                same(flat0, flat, &format!("{test:?}/{box_test:?} spheres flat, {l0} vs {l}"));
+                same(world0, world, &format!("{test:?}/{box_test:?} spheres instanced, {l0} vs {l}"));
+            }
+            for (r, h) in rays.iter().zip(&flat0.single).step_by(5) {
                 assert_same_hit(
                     scene.intersect_brute_force(r),
                     *h,

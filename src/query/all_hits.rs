@@ -126,7 +126,7 @@ impl InstancedScene {
                     bvh.each_hit_with::<K, CONS, L>(&r, stack, &mut |h| {
                         f(&self.world_hit_of(k as u32, &bvh.hit_record(h)));
                     });
-                    self.objects()[object as usize].sphere_tree().each_hit_on::<CONS>(&r, stack, &mut |h| {
+                    self.objects()[object as usize].sphere_tree().each_hit_on::<CONS, L>(&r, stack, &mut |h| {
                         f(&self.world_sphere_hit_of(k as u32, h));
                     });
                     self.objects()[object as usize].solid_tree().each_hit_on::<CONS>(&r, stack, &mut |h| {

@@ -1,6 +1,7 @@
 //! Spheres: storage in SoA leaf blocks of [`BLOCK`] and the three ray–sphere tests of the seeds
 //! and their successors, written once over [`Lanes`] so that one ray against a block of four and
-//! a packet of sixteen against one sphere run the same arithmetic.
+//! a packet of sixteen against one sphere run the same arithmetic, at every instruction-set
+//! level (`simd::Level`).
 //!
 //! - **Geometric** (the seeds' slides; Haines, "Essential Ray Tracing Algorithms", 1989): the
 //!   centre's projection on the ray, early outs for rays pointing away and for lines passing
@@ -100,11 +101,11 @@ impl<V: Lanes> RayLanes<V> {
     }
 }
 
-impl RayLanes<f32x4> {
-    /// One ray in all four lanes.
+impl<V: Lanes> RayLanes<V> {
+    /// One ray in all lanes.
     #[inline(always)]
     pub fn splat(o: Vec3, d: Vec3) -> Self {
-        let s = |v: Vec3| [f32x4::splat(v.x), f32x4::splat(v.y), f32x4::splat(v.z)];
+        let s = |v: Vec3| [V::splat(v.x), V::splat(v.y), V::splat(v.z)];
         Self::new(s(o), s(d))
     }
 }
@@ -173,30 +174,30 @@ fn dot<V: Lanes>(a: [V; 3], b: [V; 3]) -> V {
 /// The nearest hit of one ray among the spheres of a block in `(tnear, tfar]`, as `(lane, t)`;
 /// among equal distances the lowest lane wins.
 #[inline(always)]
-pub(crate) fn intersect1(
+pub(crate) fn intersect1<F: Four>(
     test: SphereTest,
     b: &SphereBlock,
-    ray: &RayLanes<f32x4>,
+    ray: &RayLanes<F>,
     tnear: f32,
     tfar: f32,
 ) -> Option<(usize, f32)> {
-    let row = |k: usize| f32x4::new(b.rows[k]);
-    let (valid, t) = first_hit(test, [row(0), row(1), row(2)], row(3), ray, f32x4::splat(tnear), f32x4::splat(tfar));
-    let zero = f32x4::splat(0.0);
+    let row = |k: usize| F::new(b.rows[k]);
+    let (valid, t) = first_hit(test, [row(0), row(1), row(2)], row(3), ray, F::splat(tnear), F::splat(tfar));
+    let zero = F::splat(0.0);
     crate::geometry::triangle::nearest(valid, t, zero, zero).map(|(lane, t, _, _)| (lane, t))
 }
 
 /// The lanes of a packet hitting sphere `lane` of `b` in `(tnear, tfar]`, with their distance.
 #[inline(always)]
-pub(crate) fn intersect_packet(
+pub(crate) fn intersect_packet<P: SimdF>(
     test: SphereTest,
     b: &SphereBlock,
     lane: usize,
-    ray: &RayLanes<Pf>,
-    tnear: Pf,
-    tfar: Pf,
-) -> (Pf, Pf) {
-    let s = |k: usize| Pf::splat(b.rows[k][lane]);
+    ray: &RayLanes<P>,
+    tnear: P,
+    tfar: P,
+) -> (P, P) {
+    let s = |k: usize| P::splat(b.rows[k][lane]);
     first_hit(test, [s(0), s(1), s(2)], s(3), ray, tnear, tfar)
 }
 
@@ -223,7 +224,7 @@ mod tests {
 
     fn one(test: SphereTest, c: Vec3, r: f32, o: Vec3, d: Vec3) -> Option<(f32, f32)> {
         let s = |x: f32| f32x4::splat(x);
-        let (t0, t1, meet) = roots(test, [s(c.x), s(c.y), s(c.z)], s(r), &RayLanes::splat(o, d));
+        let (t0, t1, meet) = roots(test, [s(c.x), s(c.y), s(c.z)], s(r), &RayLanes::<f32x4>::splat(o, d));
         (meet.to_bitmask() & 1 != 0).then(|| (t0.to_array()[0], t1.to_array()[0]))
     }
 

@@ -207,31 +207,49 @@ impl SphereBvh {
         }
         let ray = ray.clamped_to_zero();
         with_stack(|stack| {
-            dispatch_spheres!(self.test, self.box_test, |K, C| {
-                self.trace1_from_terms::<ANY, K, C>(&ray, SlabTerms::of(&ray), self.root, stack)
-            })
+            dispatch_spheres!(self.test, self.box_test, |K, C| with_level!(
+                |L| self.trace1_with::<ANY, K, C, L>(&ray, stack)
+            ))
         })
         .map(|h| self.hit_record(&h, ray.origin, ray.dir))
     }
 
+    /// [`trace1`](Self::trace1) of a checked ray with a chosen kernel and level.
+    #[inline(never)]
+    fn trace1_with<const ANY: bool, K: SphereKernel, const CONS: bool, L: Level>(
+        &self,
+        ray: &Ray,
+        stack: &mut Stack,
+    ) -> Option<LeafHit> {
+        L::call(
+            #[inline(always)]
+            || self.trace1_from_terms::<ANY, K, CONS, L>(ray, SlabTerms::of(ray), self.root, stack),
+        )
+    }
+
     /// [`trace1`](Self::trace1) of a checked ray (valid, `tnear ≥ 0`) on `stack` above its
-    /// entries, the box test chosen by the caller: an instance's object walk.
-    pub(crate) fn trace1_on<const ANY: bool, const CONS: bool>(&self, ray: &Ray, stack: &mut Stack) -> Option<Hit> {
+    /// entries, the box test and level chosen by the caller: an instance's object walk.
+    #[inline(always)]
+    pub(crate) fn trace1_on<const ANY: bool, const CONS: bool, L: Level>(
+        &self,
+        ray: &Ray,
+        stack: &mut Stack,
+    ) -> Option<Hit> {
         if self.is_empty() {
             return None;
         }
         let terms = SlabTerms::of(ray);
         let h = match self.test {
-            SphereTest::Geometric => self.trace1_from_terms::<ANY, GeometricK, CONS>(ray, terms, self.root, stack),
-            SphereTest::Algebraic => self.trace1_from_terms::<ANY, AlgebraicK, CONS>(ray, terms, self.root, stack),
-            SphereTest::Robust => self.trace1_from_terms::<ANY, RobustK, CONS>(ray, terms, self.root, stack),
+            SphereTest::Geometric => self.trace1_from_terms::<ANY, GeometricK, CONS, L>(ray, terms, self.root, stack),
+            SphereTest::Algebraic => self.trace1_from_terms::<ANY, AlgebraicK, CONS, L>(ray, terms, self.root, stack),
+            SphereTest::Robust => self.trace1_from_terms::<ANY, RobustK, CONS, L>(ray, terms, self.root, stack),
         };
         h.map(|h| self.hit_record(&h, ray.origin, ray.dir))
     }
 
     /// [`trace_packet`](Self::trace_packet) on `stack` above its entries, the box test chosen by
-    /// the caller: an instance's object walk.
-    pub(crate) fn trace_packet_on<const ANY: bool, const CONS: bool>(
+    /// the caller, at the caller's level: an instance's object walk.
+    pub(crate) fn trace_packet_on<const ANY: bool, const CONS: bool, L: Level>(
         &self,
         p: &RayPacket,
         hit: &mut HitPacket,
@@ -240,9 +258,9 @@ impl SphereBvh {
         let mut out = PacketHits::new(hit);
         if !self.is_empty() {
             match self.test {
-                SphereTest::Geometric => self.trace_packet_with::<ANY, GeometricK, CONS>(p, &mut out, stack),
-                SphereTest::Algebraic => self.trace_packet_with::<ANY, AlgebraicK, CONS>(p, &mut out, stack),
-                SphereTest::Robust => self.trace_packet_with::<ANY, RobustK, CONS>(p, &mut out, stack),
+                SphereTest::Geometric => self.trace_packet_with::<ANY, GeometricK, CONS, L>(p, &mut out, stack),
+                SphereTest::Algebraic => self.trace_packet_with::<ANY, AlgebraicK, CONS, L>(p, &mut out, stack),
+                SphereTest::Robust => self.trace_packet_with::<ANY, RobustK, CONS, L>(p, &mut out, stack),
             }
         }
         out.mask
@@ -250,7 +268,7 @@ impl SphereBvh {
 
     /// The walk of one checked ray over the subtree at `root`.
     #[inline(always)]
-    fn trace1_from_terms<const ANY: bool, K: SphereKernel, const CONS: bool>(
+    fn trace1_from_terms<const ANY: bool, K: SphereKernel, const CONS: bool, L: Level>(
         &self,
         ray: &Ray,
         terms: SlabTerms,
@@ -258,23 +276,31 @@ impl SphereBvh {
         stack: &mut Stack,
     ) -> Option<LeafHit> {
         let base = stack.push_root(root);
-        let lanes = RayLanes::splat(ray.origin, ray.dir);
-        let br = BoxRay::<Native>::with_terms(terms, ray.tnear);
+        let lanes = RayLanes::<L::F4>::splat(ray.origin, ray.dir);
+        let br = BoxRay::<L>::with_terms(terms, ray.tnear);
         let mut tfar = ray.tfar;
         let mut best = None;
-        walk1::<ANY, CONS, Native>(self.tree(), &br, stack, base, &mut tfar, |leaf, tfar, _| {
-            let (start, count) = leaf_blocks(leaf);
-            for bi in start..start + count {
-                if let Some((lane, t)) = sphere::intersect1(K::TEST, &self.blocks[bi], &lanes, ray.tnear, *tfar) {
-                    *tfar = t;
-                    best = Some(LeafHit { block: bi as u32, lane: lane as u32, t, u: 0.0, v: 0.0 });
-                    if ANY {
-                        return true;
+        walk1::<ANY, CONS, L>(
+            self.tree(),
+            &br,
+            stack,
+            base,
+            &mut tfar,
+            #[inline(always)]
+            |leaf, tfar, _| {
+                let (start, count) = leaf_blocks(leaf);
+                for bi in start..start + count {
+                    if let Some((lane, t)) = sphere::intersect1(K::TEST, &self.blocks[bi], &lanes, ray.tnear, *tfar) {
+                        *tfar = t;
+                        best = Some(LeafHit { block: bi as u32, lane: lane as u32, t, u: 0.0, v: 0.0 });
+                        if ANY {
+                            return true;
+                        }
                     }
                 }
-            }
-            false
-        });
+                false
+            },
+        );
         best
     }
 
@@ -285,27 +311,42 @@ impl SphereBvh {
         let mut out = PacketHits::new(hit);
         if !self.is_empty() {
             with_stack(|stack| {
-                dispatch_spheres!(self.test, self.box_test, |K, C| self
-                    .trace_packet_with::<ANY, K, C>(p, &mut out, stack))
+                dispatch_spheres!(self.test, self.box_test, |K, C| with_level!(
+                    |L| self.trace_packet_with::<ANY, K, C, L>(p, &mut out, stack)
+                ))
             });
         }
         out.mask
     }
 
     #[inline(never)]
-    fn trace_packet_with<const ANY: bool, K: SphereKernel, const CONS: bool>(
+    fn trace_packet_with<const ANY: bool, K: SphereKernel, const CONS: bool, L: Level>(
         &self,
         p: &RayPacket,
         out: &mut PacketHits<'_>,
         stack: &mut Stack,
     ) {
-        let Some((pb, mut tfar)) = PacketBoxes::<Native>::new(p) else {
+        L::call(
+            #[inline(always)]
+            || self.trace_packet_in::<ANY, K, CONS, L>(p, out, stack),
+        )
+    }
+
+    /// [`trace_packet_with`](Self::trace_packet_with)'s body, compiled for the level.
+    #[inline(always)]
+    fn trace_packet_in<const ANY: bool, K: SphereKernel, const CONS: bool, L: Level>(
+        &self,
+        p: &RayPacket,
+        out: &mut PacketHits<'_>,
+        stack: &mut Stack,
+    ) {
+        let Some((pb, mut tfar)) = PacketBoxes::<L>::new(p) else {
             return;
         };
         let base = stack.push_root(self.root);
-        let rl = RayLanes::new(pb.o, pb.d);
+        let rl = RayLanes::<L::Pf>::new(pb.o, pb.d);
         let switch = pb.frustum.is_none();
-        walk_packet::<ANY, CONS, Native>(self.tree(), &pb, stack, base, &mut tfar, |leaf, lanes, tfar, stack| {
+        let leaf_walk = hot!(|leaf: u32, lanes: u32, tfar: &mut L::Pf, stack: &mut Stack| {
             // Closest hit without a frustum (incoherent packets): a leaf few lanes are still open
             // for goes lane by lane, four spheres per test, instead of sixteen lanes per sphere.
             // Diffuse rays, level-6 flake, 2 threads, best vs best against Embree: 0.98 before,
@@ -318,14 +359,16 @@ impl SphereBvh {
                 lanes
             };
             if lanes != 0 {
-                out.mask |= each_lane_alone::<ANY, _, Native>(
+                out.mask |= each_lane_alone::<ANY, _, L>(
                     p,
                     lanes,
                     tfar,
+                    #[inline(always)]
                     |l, ray| {
-                        let h = self.trace1_from_terms::<ANY, K, CONS>(ray, pb.slabs.lane(l), leaf, stack)?;
+                        let h = self.trace1_from_terms::<ANY, K, CONS, L>(ray, pb.slabs.lane(l), leaf, stack)?;
                         Some((h.t, h))
                     },
+                    #[inline(always)]
                     |l, h| {
                         let r = p.get(l);
                         out.set(l, &self.hit_record(&h, r.origin, r.dir))
@@ -333,19 +376,20 @@ impl SphereBvh {
                 );
                 return ANY && out.mask == pb.live;
             }
-            self.leaf_packet::<ANY, K>(leaf, &pb, &rl, tfar, out)
+            self.leaf_packet::<ANY, K, L>(leaf, &pb, &rl, tfar, out)
         });
+        walk_packet::<ANY, CONS, L>(self.tree(), &pb, stack, base, &mut tfar, leaf_walk);
     }
 
     /// Tests the spheres of `leaf` against the open lanes of a packet (see the triangle BVH's
     /// `leaf_packet`).
     #[inline(always)]
-    fn leaf_packet<const ANY: bool, K: SphereKernel>(
+    fn leaf_packet<const ANY: bool, K: SphereKernel, L: Level>(
         &self,
         leaf: u32,
-        pb: &PacketBoxes<Native>,
-        lanes: &RayLanes<Pf>,
-        tfar: &mut Pf,
+        pb: &PacketBoxes<L>,
+        lanes: &RayLanes<L::Pf>,
+        tfar: &mut L::Pf,
         out: &mut PacketHits<'_>,
     ) -> bool {
         let (start, count) = leaf_blocks(leaf);
@@ -364,7 +408,7 @@ impl SphereBvh {
                 }
                 out.mask |= bits;
                 if ANY {
-                    *tfar = valid.select(Pf::splat(f32::NEG_INFINITY), *tfar);
+                    *tfar = valid.select(L::Pf::splat(f32::NEG_INFINITY), *tfar);
                     if out.mask == pb.live {
                         return true;
                     }
@@ -373,12 +417,12 @@ impl SphereBvh {
                 *tfar = valid.select(t, *tfar);
                 let c = blk.center(lane);
                 let ng = [
-                    t.mul_add(pb.d[0], pb.o[0]) - Pf::splat(c.x),
-                    t.mul_add(pb.d[1], pb.o[1]) - Pf::splat(c.y),
-                    t.mul_add(pb.d[2], pb.o[2]) - Pf::splat(c.z),
+                    t.mul_add(pb.d[0], pb.o[0]) - L::Pf::splat(c.x),
+                    t.mul_add(pb.d[1], pb.o[1]) - L::Pf::splat(c.y),
+                    t.mul_add(pb.d[2], pb.o[2]) - L::Pf::splat(c.z),
                 ];
-                let zero = Pf::splat(0.0);
-                out.select_hit::<Native>(valid, (t, zero, zero), ng, blk.prim[lane], blk.geom[lane]);
+                let zero = L::Pf::splat(0.0);
+                out.select_hit::<L>(valid, (t, zero, zero), ng, blk.prim[lane], blk.geom[lane]);
             }
         }
         false
@@ -413,29 +457,40 @@ impl SphereBvh {
             return;
         }
         let ray = ray.clamped_to_zero();
-        with_stack(|stack| match self.box_test {
-            BoxTest::Conservative => self.each_hit_on::<true>(&ray, stack, &mut f),
-            BoxTest::Fast => self.each_hit_on::<false>(&ray, stack, &mut f),
+        with_stack(|stack| {
+            with_level!(|L| L::call(
+                #[inline(always)]
+                || match self.box_test {
+                    BoxTest::Conservative => self.each_hit_on::<true, L>(&ray, stack, &mut f),
+                    BoxTest::Fast => self.each_hit_on::<false, L>(&ray, stack, &mut f),
+                }
+            ))
         });
     }
 
     /// [`each_hit`](Self::each_hit) of a checked ray (valid, `tnear ≥ 0`) on `stack` above its
-    /// entries, the box test chosen by the caller.
-    pub(crate) fn each_hit_on<const CONS: bool>(&self, ray: &Ray, stack: &mut Stack, f: &mut impl FnMut(&Hit)) {
+    /// entries, the box test and level chosen by the caller.
+    #[inline(always)]
+    pub(crate) fn each_hit_on<const CONS: bool, L: Level>(
+        &self,
+        ray: &Ray,
+        stack: &mut Stack,
+        f: &mut impl FnMut(&Hit),
+    ) {
         if self.is_empty() {
             return;
         }
-        let rl = RayLanes::splat(ray.origin, ray.dir);
+        let rl = RayLanes::<L::F4>::splat(ray.origin, ray.dir);
         let test = self.test;
         let base = stack.push_root(self.root);
-        let br = BoxRay::<Native>::with_terms(SlabTerms::of(ray), ray.tnear);
+        let br = BoxRay::<L>::with_terms(SlabTerms::of(ray), ray.tnear);
         // The walk's `tfar` stays the ray's: every subtree the ray enters is visited.
         let mut tfar = ray.tfar;
-        walk1::<false, CONS, Native>(self.tree(), &br, stack, base, &mut tfar, |leaf, tfar, _| {
+        let leaf_walk = hot!(|leaf: u32, tfar: &mut f32, _: &mut Stack| {
             let (start, count) = leaf_blocks(leaf);
             for bi in start..start + count {
                 let b = &self.blocks[bi];
-                let row = |k: usize| f32x4::new(b.rows[k]);
+                let row = hot!(|k: usize| L::F4::new(b.rows[k]));
                 let (t0, t1, meet) = sphere::roots(test, [row(0), row(1), row(2)], row(3), &rl);
                 let (t0, t1) = (t0.to_array(), t1.to_array());
                 let mut bits = meet.to_bitmask();
@@ -452,15 +507,25 @@ impl SphereBvh {
             }
             false
         });
+        walk1::<false, CONS, L>(self.tree(), &br, stack, base, &mut tfar, leaf_walk);
     }
 
-    /// The closest hit by testing every block: the reference the tree is tested against.
+    /// The closest hit by testing every block: the reference the tree is tested against (at the
+    /// active level, as the walks are).
     pub fn brute_force(&self, ray: &Ray) -> Option<Hit> {
         if !ray.is_valid() {
             return None;
         }
         let ray = ray.clamped_to_zero();
-        let lanes = RayLanes::splat(ray.origin, ray.dir);
+        with_level!(|L| L::call(
+            #[inline(always)]
+            || self.brute_force_with::<L>(&ray)
+        ))
+    }
+
+    #[inline(always)]
+    fn brute_force_with<L: Level>(&self, ray: &Ray) -> Option<Hit> {
+        let lanes = RayLanes::<L::F4>::splat(ray.origin, ray.dir);
         let mut tfar = ray.tfar;
         let mut best = None;
         for (bi, b) in self.blocks.iter().enumerate() {

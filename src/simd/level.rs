@@ -379,6 +379,7 @@ mod tests {
             put(&mut out, x / y);
             put(&mut out, -x);
             put(&mut out, x.abs());
+            put(&mut out, x.sqrt());
             put(&mut out, x.copysign(y));
             put(&mut out, x.fast_min(y));
             put(&mut out, x.fast_max(y));
@@ -415,6 +416,8 @@ mod tests {
             let f4 = L::F4::new(a[..4].try_into().unwrap());
             let finite4 = f4.simd_lt(L::F4::splat(f32::INFINITY)) & f4.simd_eq(f4);
             let f4 = finite4.select(f4, L::F4::splat(9.0));
+            out.extend(f4.abs().sqrt().to_array().map(bits));
+            out.extend(n8.abs().sqrt().to_array().map(bits));
             out.push(bits(f4.min4()));
             out.extend((0..4).map(|l| bits(f4.lane4(l))));
         }

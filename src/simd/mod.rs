@@ -5,8 +5,8 @@
 //! over an instruction-set [`Level`] (see `level.rs`): `wide`'s types as the crate is compiled
 //! (AVX-512 or AVX2 with the repository's `-C target-cpu=native`, SSE2 in a default build), or
 //! `core::arch` vectors for AVX2 and AVX-512 chosen at run time (`x86.rs`), so that a crate
-//! depending on strahl runs the wide kernels without any compiler flags. The shapes' kernels use
-//! `wide` directly ([`Lanes`]).
+//! depending on strahl runs the wide kernels without any compiler flags. The sphere tests are
+//! written against [`Lanes`] (short names over [`SimdF`]) and run at every level too.
 #![allow(unsafe_code)]
 
 mod level;
@@ -171,6 +171,8 @@ pub(crate) trait SimdF:
     fn new(a: Self::Arr) -> Self;
     fn to_array(self) -> Self::Arr;
     fn abs(self) -> Self;
+    /// Square root per lane (correctly rounded, as `sqrtps`).
+    fn sqrt(self) -> Self;
     /// `self` with the sign of `s`.
     fn copysign(self, s: Self) -> Self;
     /// `maxps`: `b` where either is NaN.
@@ -213,21 +215,9 @@ pub(crate) trait Packet: SimdF<Arr = [f32; 16]> + BitOrder {
 }
 
 /// The lane operations the shape kernels are written against once for every width: four
-/// lanes (one ray against a leaf block), sixteen (a packet against one shape).
-pub(crate) trait Lanes:
-    Fma
-    + core::ops::Add<Output = Self>
-    + core::ops::Sub<Output = Self>
-    + core::ops::Div<Output = Self>
-    + core::ops::Neg<Output = Self>
-    + core::ops::BitAnd<Output = Self>
-    + core::ops::BitOr<Output = Self>
-    + core::ops::Not<Output = Self>
-{
-    fn splat(x: f32) -> Self;
-    fn sqrt(self) -> Self;
-    /// `self` with the sign of `s`.
-    fn copysign(self, s: Self) -> Self;
+/// lanes (one ray against a leaf block), sixteen (a packet against one shape); short names over
+/// [`SimdF`], so every level's lanes have them.
+pub(crate) trait Lanes: SimdF {
     fn min(self, b: Self) -> Self;
     fn max(self, b: Self) -> Self;
     /// All bits set where `self < b`.
@@ -238,45 +228,28 @@ pub(crate) trait Lanes:
     fn sel(self, t: Self, f: Self) -> Self;
 }
 
-macro_rules! lanes {
-    ($($f:ty),*) => {$(
-        impl Lanes for $f {
-            #[inline(always)]
-            fn splat(x: f32) -> Self {
-                <$f>::splat(x)
-            }
-            #[inline(always)]
-            fn sqrt(self) -> Self {
-                <$f>::sqrt(self)
-            }
-            #[inline(always)]
-            fn copysign(self, s: Self) -> Self {
-                <$f>::copysign(self, s)
-            }
-            #[inline(always)]
-            fn min(self, b: Self) -> Self {
-                self.fast_min(b)
-            }
-            #[inline(always)]
-            fn max(self, b: Self) -> Self {
-                self.fast_max(b)
-            }
-            #[inline(always)]
-            fn lt(self, b: Self) -> Self {
-                self.simd_lt(b)
-            }
-            #[inline(always)]
-            fn le(self, b: Self) -> Self {
-                self.simd_le(b)
-            }
-            #[inline(always)]
-            fn sel(self, t: Self, f: Self) -> Self {
-                self.select(t, f)
-            }
-        }
-    )*};
+impl<T: SimdF> Lanes for T {
+    #[inline(always)]
+    fn min(self, b: Self) -> Self {
+        self.fast_min(b)
+    }
+    #[inline(always)]
+    fn max(self, b: Self) -> Self {
+        self.fast_max(b)
+    }
+    #[inline(always)]
+    fn lt(self, b: Self) -> Self {
+        self.simd_lt(b)
+    }
+    #[inline(always)]
+    fn le(self, b: Self) -> Self {
+        self.simd_le(b)
+    }
+    #[inline(always)]
+    fn sel(self, t: Self, f: Self) -> Self {
+        self.select(t, f)
+    }
 }
-lanes!(f32x4, f32x8, f32x16);
 
 /// Lane count of a ray packet (K in Embree's naming): 16 rays, a 4×4 pixel tile.
 pub const PACKET_WIDTH: usize = 16;

@@ -26,6 +26,10 @@ macro_rules! simd_f {
                 <$t>::abs(self)
             }
             #[inline(always)]
+            fn sqrt(self) -> Self {
+                <$t>::sqrt(self)
+            }
+            #[inline(always)]
             fn copysign(self, s: Self) -> Self {
                 <$t>::copysign(self, s)
             }

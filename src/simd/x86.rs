@@ -135,7 +135,7 @@ binops!(V16, _mm512_add_ps, _mm512_sub_ps, _mm512_mul_ps, _mm512_div_ps, _mm512_
 /// The methods V4 and V8 share: vector masks, `blendv`, `movemask`.
 macro_rules! vector_mask_lanes {
     ($t:ident, $n:expr, $set1:ident, $loadu:ident, $storeu:ident, $max:ident, $min:ident,
-     $cmp:ident, $blendv:ident, $movemask:ident, $fmadd:ident, $fmsub:ident) => {
+     $cmp:ident, $blendv:ident, $movemask:ident, $fmadd:ident, $fmsub:ident, $sqrt:ident) => {
         impl $t {
             #[inline(always)]
             fn cmp<const P: i32>(self, b: Self) -> Self {
@@ -163,6 +163,10 @@ macro_rules! vector_mask_lanes {
             #[inline(always)]
             fn abs(self) -> Self {
                 self & Self::splat(f32::from_bits(i32::MAX as u32))
+            }
+            #[inline(always)]
+            fn sqrt(self) -> Self {
+                $t(isa!($sqrt(self.0)))
             }
             #[inline(always)]
             fn copysign(self, s: Self) -> Self {
@@ -233,7 +237,8 @@ vector_mask_lanes!(
     _mm_blendv_ps,
     _mm_movemask_ps,
     _mm_fmadd_ps,
-    _mm_fmsub_ps
+    _mm_fmsub_ps,
+    _mm_sqrt_ps
 );
 vector_mask_lanes!(
     V8,
@@ -247,7 +252,8 @@ vector_mask_lanes!(
     _mm256_blendv_ps,
     _mm256_movemask_ps,
     _mm256_fmadd_ps,
-    _mm256_fmsub_ps
+    _mm256_fmsub_ps,
+    _mm256_sqrt_ps
 );
 
 impl Four for V4 {
@@ -386,6 +392,10 @@ impl SimdF for W16 {
     fn abs(self) -> Self {
         W16(self.0.abs(), self.1.abs())
     }
+    #[inline(always)]
+    fn sqrt(self) -> Self {
+        W16(self.0.sqrt(), self.1.sqrt())
+    }
     halves!(copysign, fast_max, fast_min, simd_lt, simd_le, simd_gt, simd_ge, simd_eq, simd_ne);
     #[inline(always)]
     fn select(self, t: Self, f: Self) -> Self {
@@ -472,6 +482,10 @@ impl SimdF for V16 {
     #[inline(always)]
     fn abs(self) -> Self {
         self & Self::splat(f32::from_bits(i32::MAX as u32))
+    }
+    #[inline(always)]
+    fn sqrt(self) -> Self {
+        V16(isa!(_mm512_sqrt_ps(self.0)))
     }
     #[inline(always)]
     fn copysign(self, s: Self) -> Self {
