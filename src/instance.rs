@@ -451,7 +451,9 @@ impl InstancedScene {
 
     /// Closest hits (into `hit`, in world space) or occlusion of a packet; returns the lanes
     /// that hit (are occluded).
-    fn trace_packet<const ANY: bool>(&self, p: &RayPacket, hit: &mut HitPacket) -> u32 {
+    /// Without `hit` (occlusion), into a scratch record made at the kernels' level (see
+    /// `Bvh::trace_packet_with`).
+    fn trace_packet<const ANY: bool>(&self, p: &RayPacket, hit: Option<&mut HitPacket>) -> u32 {
         with_stack(|stack| {
             dispatch!(self.test, self.box_test, |K, C| with_level!(
                 |L| self.trace_packet_with::<ANY, K, C, L>(p, hit, stack)
@@ -463,12 +465,22 @@ impl InstancedScene {
     fn trace_packet_with<const ANY: bool, K: Kernel, const CONS: bool, L: Level>(
         &self,
         p: &RayPacket,
-        hit: &mut HitPacket,
+        hit: Option<&mut HitPacket>,
         stack: &mut Stack,
     ) -> u32 {
         L::call(
             #[inline(always)]
-            || self.trace_packet_in::<ANY, K, CONS, L>(p, hit, stack),
+            || {
+                let mut scratch;
+                let hit = match hit {
+                    Some(h) => h,
+                    None => {
+                        scratch = HitPacket::default();
+                        &mut scratch
+                    }
+                };
+                self.trace_packet_in::<ANY, K, CONS, L>(p, hit, stack)
+            },
         )
     }
 
@@ -565,7 +577,7 @@ impl InstancedScene {
                     // hits before.
                     for part in 0..3 {
                         let mask = if part == 0 {
-                            bvh.trace_packet_with::<ANY, K, CONS, L>(&q, &mut r, stack)
+                            bvh.trace_packet_with::<ANY, K, CONS, L>(&q, Some(&mut r), stack)
                         } else if (part == 1 && spheres.is_empty()) || (part == 2 && solids.is_empty()) {
                             0
                         } else {
@@ -823,16 +835,16 @@ impl Query for InstancedScene {
 
     fn intersect_packet_each(&self, rays: &RayPacket, mut f: impl FnMut(usize, &Hit)) {
         let mut hits = HitPacket::default();
-        let mask = self.trace_packet::<false>(rays, &mut hits);
+        let mask = self.trace_packet::<false>(rays, Some(&mut hits));
         each_hit(&hits, mask, |lane, h| f(lane, h));
     }
 
     fn intersect_packet(&self, rays: &RayPacket, hits: &mut HitPacket) {
-        self.trace_packet::<false>(rays, hits);
+        self.trace_packet::<false>(rays, Some(hits));
     }
 
     fn occluded_packet(&self, rays: &RayPacket) -> u32 {
-        self.trace_packet::<true>(rays, &mut HitPacket::default())
+        self.trace_packet::<true>(rays, None)
     }
 }
 

@@ -252,12 +252,12 @@ impl Query for Scene {
     }
 
     fn occluded_packet(&self, rays: &RayPacket) -> u32 {
-        let tri = self.bvh.trace_packet::<true>(rays, &mut HitPacket::default());
+        let tri = self.bvh.occluded_packet(rays);
         if !self.has_shapes() || tri == rays.active & crate::simd::low_bits(PACKET_WIDTH) {
             return tri;
         }
         let rest = RayPacket { active: rays.active & !tri, ..*rays };
-        let sph = tri | self.shapes.trace_packet::<true>(&rest, &mut HitPacket::default());
+        let sph = tri | self.shapes.occluded_packet(&rest);
         if self.solid_tree.is_empty() || sph == rays.active & crate::simd::low_bits(PACKET_WIDTH) {
             return sph;
         }

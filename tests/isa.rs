@@ -197,3 +197,29 @@ fn every_level_answers_like_the_compiled_one_on_spheres() {
         }
     }
 }
+
+/// The builder's binning (object and spatial splits) runs at the active level too: every level
+/// builds the same tree, to the bit (the binning has no multiply-add to fuse). Serial builds: a
+/// parallel build with spatial splits shares its split budget between threads, so its tree may
+/// depend on which subtree spends it first.
+#[test]
+fn every_level_builds_the_same_tree() {
+    let _turn = LEVEL.lock().unwrap_or_else(|e| e.into_inner());
+    let levels: Vec<Isa> = Isa::ALL.into_iter().filter(|i| i.supported()).collect();
+    // Large enough for parallel binning chunks and the run-length binning of coherent input.
+    let meshes = vec![random_soup(9, 30_000, 0.05), uv_sphere(Vec3::new(0.2, -0.1, 0.0), 0.6, 96, 192)];
+    for cfg in [BuildConfig::default(), BuildConfig::high()] {
+        let cfg = BuildConfig { parallel_threshold: usize::MAX, ..cfg };
+        let mut seen = Vec::new();
+        for &l in levels.iter().chain(&levels) {
+            set_isa(l).unwrap();
+            let s = Scene::build(meshes.clone(), &cfg).unwrap();
+            let st = s.stats();
+            seen.push((l, (st.inner_nodes, st.leaves, st.blocks, st.references, st.sah.to_bits(), st.depth)));
+        }
+        assert!(seen[0].1.3 > 30_000, "spatial splits or not, every triangle is referenced");
+        for (l, st) in &seen[1..] {
+            assert_eq!(*st, seen[0].1, "{l} against {}", seen[0].0);
+        }
+    }
+}

@@ -15,7 +15,7 @@ use super::node::{EMPTY, MAX_LEAF_BLOCKS, Node, WIDTH, is_leaf, leaf_blocks, lea
 use super::traverse::BoxTest;
 use crate::geometry::triangle::{BLOCK, TriangleTest};
 use crate::shapes::{QuarticSolver, SphereTest};
-use crate::simd::trunc4;
+use crate::simd::{Level, trunc4, with_level};
 
 /// Builder settings. Costs are per node visit and per block test, as in Embree's statistics.
 #[derive(Clone, Debug, PartialEq)]
@@ -181,7 +181,7 @@ pub(crate) struct Aabb {
 impl Aabb {
     pub const EMPTY: Self = Self { lo: Vec3A::INFINITY, hi: Vec3A::NEG_INFINITY };
 
-    #[inline]
+    #[inline(always)]
     pub fn grow(&mut self, o: &Aabb) {
         self.lo = self.lo.min(o.lo);
         self.hi = self.hi.max(o.hi);
@@ -219,13 +219,13 @@ impl PrimRef {
         self.lo.w.to_bits()
     }
 
-    #[inline]
+    #[inline(always)]
     pub fn bounds(&self) -> Aabb {
         Aabb { lo: Vec3A::from_vec4(self.lo), hi: Vec3A::from_vec4(self.hi) }
     }
 
     /// Twice the centroid (saves a multiply; only ratios of it are used).
-    #[inline]
+    #[inline(always)]
     fn center2(&self) -> Vec3A {
         Vec3A::from_vec4(self.lo) + Vec3A::from_vec4(self.hi)
     }
@@ -450,7 +450,18 @@ const RUN_CHANGES: u32 = 20;
 /// mesh order), and large sets whose order is that coherent keep each axis's current bin in
 /// registers instead (2.5–3.0 ns; 5.5–10 ns on shuffled input, hence the sample). PERFORMANCE.md
 /// has the figures.
+///
+/// Runs at the active instruction-set level (`simd::with_level!`): its code, glam's included, is
+/// inlined into the level's `#[target_feature]` function, as the walks are.
 fn bin_into(bins: &mut Bins, prims: &[PrimRef], offset: Vec3A, scale: Vec3A) {
+    with_level!(|L| L::call(
+        #[inline(always)]
+        || bin_into_in(bins, prims, offset, scale)
+    ))
+}
+
+#[inline(always)]
+fn bin_into_in(bins: &mut Bins, prims: &[PrimRef], offset: Vec3A, scale: Vec3A) {
     let last = Vec3A::splat((bins.n - 1) as f32);
     if prims.len() >= RUN_MIN {
         let mut prev = [-1i32; 4];
@@ -491,6 +502,7 @@ fn bin_into(bins: &mut Bins, prims: &[PrimRef], offset: Vec3A, scale: Vec3A) {
 
 /// [`bin_into`] for references in coherent order: each axis grows a box and a count for its
 /// current bin in registers and adds them to the bins only when the bin changes.
+#[inline(always)]
 fn bin_runs(bins: &mut Bins, prims: &[PrimRef], offset: Vec3A, scale: Vec3A, last: Vec3A) {
     let Some(first) = prims.first() else { return };
     let b = bin_of(first, offset, scale, last);

@@ -14,7 +14,7 @@
 
 use std::sync::atomic::{AtomicIsize, Ordering};
 
-use crate::simd::f32x16;
+use crate::simd::{Level, SimdF, with_level};
 
 use glam::Vec3A;
 use rayon::prelude::*;
@@ -340,36 +340,60 @@ struct PlaneCuts {
 }
 
 impl PlaneCuts {
+    /// The cuts, with the active instruction-set level's sixteen-lane vectors (one instruction
+    /// each at AVX-512, two at AVX2). Only this part of the spatial binning is entered at the
+    /// level: inlining all of `SpatialBins::add` into the level's function made the native
+    /// build's spatial-split builds 15–20% slower (PERFORMANCE.md).
     fn new(v: &[Vec3A; 3], axis: usize, lo: f32, w: f32) -> Self {
+        with_level!(|L| L::call(
+            #[inline(always)]
+            || Self::new_in::<L>(v, axis, lo, w)
+        ))
+    }
+
+    #[inline(always)]
+    fn new_in<L: Level>(v: &[Vec3A; 3], axis: usize, lo: f32, w: f32) -> Self {
         const _: () = assert!(SPATIAL_BINS <= 17, "one lane per inner plane");
-        let k = f32x16::from(std::array::from_fn::<f32, 16, _>(|i| (i + 1) as f32));
-        let plane = f32x16::splat(lo) + k * f32x16::splat(w);
-        let mut blo = [[f32x16::splat(f32::INFINITY); 3]; 2];
-        let mut bhi = [[f32x16::splat(f32::NEG_INFINITY); 3]; 2];
-        let mut grow = |side: usize, mask: f32x16, x: [f32x16; 3]| {
+        type P<L> = <L as Level>::Pf;
+        const K: [f32; 16] = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0, 12.0, 13.0, 14.0, 15.0, 16.0];
+        let plane = P::<L>::splat(lo) + P::<L>::new(K) * P::<L>::splat(w);
+        let mut blo = [[P::<L>::splat(f32::INFINITY); 3]; 2];
+        let mut bhi = [[P::<L>::splat(f32::NEG_INFINITY); 3]; 2];
+        #[inline(always)]
+        fn grow<V: SimdF>(blo: &mut [[V; 3]; 2], bhi: &mut [[V; 3]; 2], side: usize, mask: V, x: [V; 3]) {
             for c in 0..3 {
                 blo[side][c] = mask.select(blo[side][c].fast_min(x[c]), blo[side][c]);
                 bhi[side][c] = mask.select(bhi[side][c].fast_max(x[c]), bhi[side][c]);
             }
-        };
+        }
         for i in 0..3 {
             let (p, q) = (v[i], v[(i + 1) % 3]);
-            let (pa, qa) = (f32x16::splat(p[axis]), f32x16::splat(q[axis]));
-            let ps = [f32x16::splat(p.x), f32x16::splat(p.y), f32x16::splat(p.z)];
-            grow(0, pa.simd_le(plane), ps);
-            grow(1, pa.simd_ge(plane), ps);
+            let (pa, qa) = (P::<L>::splat(p[axis]), P::<L>::splat(q[axis]));
+            let ps = [P::<L>::splat(p.x), P::<L>::splat(p.y), P::<L>::splat(p.z)];
+            grow(&mut blo, &mut bhi, 0, pa.simd_le(plane), ps);
+            grow(&mut blo, &mut bhi, 1, pa.simd_ge(plane), ps);
             let cross = (pa.simd_lt(plane) & qa.simd_gt(plane)) | (pa.simd_gt(plane) & qa.simd_lt(plane));
             if cross.to_bitmask() == 0 {
                 continue;
             }
             // Lanes without a crossing may divide by zero; their results are never taken.
             let t = (plane - pa) / (qa - pa);
-            let mut x = [0usize, 1, 2].map(|c| ps[c] + (f32x16::splat(q[c]) - ps[c]) * t);
+            let mut x = ps;
+            for c in 0..3 {
+                x[c] = ps[c] + (P::<L>::splat(q[c]) - ps[c]) * t;
+            }
             x[axis] = plane;
-            grow(0, cross, x);
-            grow(1, cross, x);
+            grow(&mut blo, &mut bhi, 0, cross, x);
+            grow(&mut blo, &mut bhi, 1, cross, x);
         }
-        Self { lo: blo.map(|s| s.map(|c| c.to_array())), hi: bhi.map(|s| s.map(|c| c.to_array())) }
+        let mut cuts = PlaneCuts { lo: [[[0.0; 16]; 3]; 2], hi: [[[0.0; 16]; 3]; 2] };
+        for s in 0..2 {
+            for c in 0..3 {
+                cuts.lo[s][c] = blo[s][c].to_array();
+                cuts.hi[s][c] = bhi[s][c].to_array();
+            }
+        }
+        cuts
     }
 
     /// The left and right sides' boxes at lane `k` (possibly empty).

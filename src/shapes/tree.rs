@@ -319,6 +319,36 @@ impl SphereBvh {
         out.mask
     }
 
+    /// The occluded lanes of a packet, the hits recorded in a scratch record made at the
+    /// kernels' level (see `Bvh::trace_packet_with`).
+    pub fn occluded_packet(&self, p: &RayPacket) -> u32 {
+        if self.is_empty() {
+            return 0;
+        }
+        with_stack(|stack| {
+            dispatch_spheres!(self.test, self.box_test, |K, C| with_level!(
+                |L| self.occluded_packet_with::<K, C, L>(p, stack)
+            ))
+        })
+    }
+
+    #[inline(never)]
+    fn occluded_packet_with<K: SphereKernel, const CONS: bool, L: Level>(
+        &self,
+        p: &RayPacket,
+        stack: &mut Stack,
+    ) -> u32 {
+        L::call(
+            #[inline(always)]
+            || {
+                let mut hit = HitPacket::default();
+                let mut out = PacketHits::new(&mut hit);
+                self.trace_packet_in::<true, K, CONS, L>(p, &mut out, stack);
+                out.mask
+            },
+        )
+    }
+
     #[inline(never)]
     fn trace_packet_with<const ANY: bool, K: SphereKernel, const CONS: bool, L: Level>(
         &self,
