@@ -22,7 +22,7 @@ use rayon::prelude::*;
 use crate::bvh::build::{self, Aabb, PrimRef};
 use crate::bvh::node::{EMPTY, MAX_BLOCK_INDEX, Node, leaf_blocks};
 use crate::bvh::traverse::{
-    BoxRay, LaneSlabs, LeafHit, PacketBoxes, PacketHits, SlabTerms, Stack, Tree, dispatch, each_lane_alone,
+    BoxRay, LaneSlabs, LeafHit, PacketBoxes, PacketHits, SlabTerms, Stack, Tree, dispatch, each_lane_alone, or_scratch,
     walk_packet, walk1, with_stack,
 };
 use crate::bvh::{BoxTest, BuildConfig, INSTANCED_FAR_MEMORY_BYTES};
@@ -434,7 +434,7 @@ impl InstancedScene {
                     }
                     let solids = object.solid_tree();
                     if !solids.is_empty()
-                        && let Some(h) = solids.trace1_on::<ANY, CONS>(&Ray { tfar: *tfar, ..r }, stack)
+                        && let Some(h) = solids.trace1_on::<ANY, CONS, L>(&Ray { tfar: *tfar, ..r }, stack)
                     {
                         *tfar = h.t;
                         best = Some((k as u32, ObjHit::Sphere(p.sphere_hit(h))));
@@ -471,15 +471,8 @@ impl InstancedScene {
         L::call(
             #[inline(always)]
             || {
-                let mut scratch;
-                let hit = match hit {
-                    Some(h) => h,
-                    None => {
-                        scratch = HitPacket::default();
-                        &mut scratch
-                    }
-                };
-                self.trace_packet_in::<ANY, K, CONS, L>(p, hit, stack)
+                let mut scratch = None;
+                self.trace_packet_in::<ANY, K, CONS, L>(p, or_scratch(hit, &mut scratch), stack)
             },
         )
     }
@@ -566,7 +559,8 @@ impl InstancedScene {
                                     spheres.trace1_on::<false, CONS, L>(&bounded, stack).map(|h| pl.sphere_hit(h));
                                 let near = sphere.or(tri);
                                 let bounded = Ray { tfar: near.map_or(ray.tfar, |h| h.t), ..*ray };
-                                let solid = solids.trace1_on::<false, CONS>(&bounded, stack).map(|h| pl.sphere_hit(h));
+                                let solid =
+                                    solids.trace1_on::<false, CONS, L>(&bounded, stack).map(|h| pl.sphere_hit(h));
                                 solid.or(near).map(|h| (h.t, h))
                             },
                             |l, h| out.set(l, &self.world_hit(k as u32, &h)),
@@ -585,7 +579,7 @@ impl InstancedScene {
                             let m = if part == 1 {
                                 spheres.trace_packet_on::<ANY, CONS, L>(&bounded, &mut r, stack)
                             } else {
-                                solids.trace_packet_on::<ANY, CONS>(&bounded, &mut r, stack)
+                                solids.trace_packet_on::<ANY, CONS, L>(&bounded, &mut r, stack)
                             };
                             if pl.mirror {
                                 for l in 0..r.t.len() {

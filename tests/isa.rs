@@ -14,8 +14,8 @@ use glam::{Affine3A, Quat, Vec3};
 use strahl::procedural::{self, uv_sphere};
 use strahl::simd::{Isa, isa, set_isa};
 use strahl::{
-    BoxTest, BuildConfig, Coherence, Hit, HitStream, Instance, InstancedScene, Query, Ray, RayPacket, RayStream, Scene,
-    SphereSet, SphereTest, TriangleTest,
+    BoxTest, BuildConfig, Coherence, Hit, HitStream, Instance, InstancedScene, QuarticSolver, Query, Ray, RayPacket,
+    RayStream, Scene, SphereSet, SphereTest, TriangleTest,
 };
 
 /// The level is one setting for the whole process: the tests here take turns.
@@ -220,6 +220,42 @@ fn every_level_builds_the_same_tree() {
         assert!(seen[0].1.3 > 30_000, "spatial splits or not, every triangle is referenced");
         for (l, st) in &seen[1..] {
             assert_eq!(*st, seen[0].1, "{l} against {}", seen[0].0);
+        }
+    }
+}
+
+/// Solids (data/solids.toml: CSG, tori, quadrics, superquadrics, blobs, an implicit surface),
+/// instanced as the file places them and flat, with every box test and quartic solver: every
+/// level answers like the first. Their walks and root finders run at the level too.
+#[test]
+fn every_level_answers_like_the_compiled_one_on_solids() {
+    let _turn = LEVEL.lock().unwrap_or_else(|e| e.into_inner());
+    let levels: Vec<Isa> = Isa::ALL.into_iter().filter(|i| i.supported()).collect();
+    let file =
+        strahl::SceneFile::read(std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/solids.toml")).unwrap();
+    let mut rays = random_rays(73, 1500);
+    for k in 0..1024 {
+        let (x, y) = ((k % 32) as f32 / 16.0 - 1.0, (k / 32) as f32 / 16.0 - 1.0);
+        rays.push(Ray::new(Vec3::new(0.0, 2.5, -7.0), Vec3::new(3.0 * x, 1.5 * y - 1.0, 7.0)));
+    }
+    for solver in QuarticSolver::ALL {
+        for box_test in [BoxTest::Conservative, BoxTest::Fast] {
+            let cfg = BuildConfig { quartic_solver: solver, box_test, ..BuildConfig::default() };
+            let world = file.build(&cfg).unwrap();
+            let flat = Scene::build_with_solids(vec![], vec![], file.load_solids().concat(), &cfg).unwrap();
+            let mut per_level = Vec::new();
+            for &l in &levels {
+                set_isa(l).unwrap();
+                per_level.push((l, answers(&flat, &rays), answers(&world, &rays)));
+            }
+            let (l0, flat0, world0) = &per_level[0];
+            let solid_hits = world0.single.iter().flatten().count();
+            assert!(solid_hits > rays.len() / 5, "{solver:?}: only {solid_hits} hits");
+            assert!(flat0.single.iter().flatten().count() > rays.len() / 10, "{solver:?}: flat solids hit");
+            for (l, flat, world) in &per_level[1..] {
+                same(flat0, flat, &format!("{solver:?}/{box_test:?} solids flat, {l0} vs {l}"));
+                same(world0, world, &format!("{solver:?}/{box_test:?} solids instanced, {l0} vs {l}"));
+            }
         }
     }
 }

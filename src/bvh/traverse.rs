@@ -816,15 +816,8 @@ impl Bvh {
         L::call(
             #[inline(always)]
             || {
-                let mut scratch;
-                let hit = match hit {
-                    Some(h) => h,
-                    None => {
-                        scratch = HitPacket::default();
-                        &mut scratch
-                    }
-                };
-                let mut out = PacketHits::new(hit);
+                let mut scratch = None;
+                let mut out = PacketHits::new(or_scratch(hit, &mut scratch));
                 self.trace_packet_from::<ANY, K, CONS, L>(p, self.root, &mut out, stack);
                 out.mask
             },
@@ -1452,6 +1445,16 @@ pub(crate) fn walk_packet<const ANY: bool, const CONS: bool, L: Level>(
         }
     }
     stack.len = base;
+}
+
+/// `hit`, or else a default record made in `scratch`: the occlusion walks' throw-away record of
+/// hits. Called inside [`Level::call`] so that the 640-byte record is written at the level.
+#[inline(always)]
+pub(crate) fn or_scratch<'a>(hit: Option<&'a mut HitPacket>, scratch: &'a mut Option<HitPacket>) -> &'a mut HitPacket {
+    match hit {
+        Some(h) => h,
+        None => scratch.insert(HitPacket::default()),
+    }
 }
 
 #[cfg(test)]

@@ -129,7 +129,7 @@ impl InstancedScene {
                     self.objects()[object as usize].sphere_tree().each_hit_on::<CONS, L>(&r, stack, &mut |h| {
                         f(&self.world_sphere_hit_of(k as u32, h));
                     });
-                    self.objects()[object as usize].solid_tree().each_hit_on::<CONS>(&r, stack, &mut |h| {
+                    self.objects()[object as usize].solid_tree().each_hit_on::<CONS, L>(&r, stack, &mut |h| {
                         f(&self.world_sphere_hit_of(k as u32, h));
                     });
                 }

@@ -11,6 +11,7 @@ use glam::{Affine3A, DAffine3, DMat3, DVec3, Vec3};
 use super::primitive::{Bound, Primitive, Span};
 use super::solve::QuarticSolver;
 use crate::geometry::MAX_COORDINATE;
+use crate::simd::{Level, with_level};
 
 /// A CSG operation over two or more operands (POV-Ray's `union`, `intersection`,
 /// `difference`).
@@ -240,6 +241,7 @@ impl CompiledSolid {
 
     /// The spans of the world line `o + t d` inside the solid, ascending, into `out` (cleared
     /// first): all of them, also behind `t = 0`.
+    #[inline(always)]
     pub fn spans(&self, o: DVec3, d: DVec3, out: &mut Vec<Span>) {
         out.clear();
         // Postfix evaluation: each list is a segment at the end of `out`, `starts` its start.
@@ -280,7 +282,20 @@ impl CompiledSolid {
         // A lone primitive's spans are exact; CSG results were cleaned as they were merged.
     }
 
+    /// [`first_hit`](Self::first_hit) compiled for the level `L`: the spans, the primitives'
+    /// span functions and the quartic solvers are inlined into it, so that a dependency build
+    /// runs them with the level's instructions (VEX encoding, AVX registers) instead of the
+    /// crate's baseline.
+    #[inline(never)]
+    pub fn first_hit_at<L: Level>(&self, o: Vec3, d: Vec3, tnear: f32, tfar: f32) -> Option<(f32, Bound)> {
+        L::call(
+            #[inline(always)]
+            || self.first_hit(o, d, tnear, tfar),
+        )
+    }
+
     /// The first surface crossing in `(tnear, tfar]` of the world ray: `(t, bound)`.
+    #[inline(always)]
     pub fn first_hit(&self, o: Vec3, d: Vec3, tnear: f32, tfar: f32) -> Option<(f32, Bound)> {
         let (o, d) = (dvec(o), dvec(d));
         SPANS.with(|buf| {
@@ -354,7 +369,7 @@ impl PreparedSolid {
             return None;
         }
         let r = ray.clamped_to_zero();
-        let (t, b) = self.0.first_hit(r.origin, r.dir, r.tnear, r.tfar)?;
+        let (t, b) = with_level!(|L| self.0.first_hit_at::<L>(r.origin, r.dir, r.tnear, r.tfar))?;
         Some((t, self.0.normal(r.origin, r.dir, &b), b.leaf as u32))
     }
 }

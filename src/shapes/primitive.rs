@@ -151,6 +151,7 @@ const NONE: Spans = ([Span { enter: B0, exit: B0 }; 2], 0);
 const B0: Bound = Bound { t: 0.0, leaf: 0, face: 0, flip: false };
 
 /// The spans of the line `o + t d` inside `{a t² + b t + c ≤ 0}`, faces `face`.
+#[inline(always)]
 fn quadratic_spans(a: f64, b: f64, c: f64, leaf: u16, face: u8) -> Spans {
     const INF: f64 = f64::INFINITY;
     let one = |t0, t1| ([Span::new(t0, face, t1, face, leaf), Span::new(0.0, 0, 0.0, 0, 0)], 1);
@@ -218,6 +219,7 @@ impl Primitive {
     /// The spans of the line `o + t d` (object space, any `d ≠ 0`) inside this primitive, over
     /// all `t` (also behind the ray's start: a ray may start inside). The disc gives its one
     /// crossing as a span of zero width.
+    #[inline(always)]
     pub(crate) fn spans(&self, o: DVec3, d: DVec3, solver: QuarticSolver, leaf: u16, out: &mut Vec<Span>) {
         match self {
             Primitive::Superellipsoid { .. }
@@ -261,6 +263,7 @@ impl Primitive {
     }
 
     /// The spans of the primitives with at most two of them.
+    #[inline(always)]
     fn spans_fixed(&self, o: DVec3, d: DVec3, solver: QuarticSolver, leaf: u16) -> Spans {
         match *self {
             Primitive::Sphere => {
@@ -626,6 +629,7 @@ thread_local! {
 /// direction normalized (POV-Ray's practice: far origins otherwise cancel away the roots). The
 /// pieces between roots are classified by `F` at their middles, so a root the solver loses
 /// merges two pieces instead of turning the inside out.
+#[inline(always)]
 fn torus_spans(big: f64, small: f64, o: DVec3, d: DVec3, solver: QuarticSolver, leaf: u16) -> Spans {
     let len = d.length();
     let u = d / len;

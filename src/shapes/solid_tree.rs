@@ -18,7 +18,7 @@ use crate::bvh::{BoxTest, BuildConfig, BuildStats, PlacedTree, place_tree};
 use crate::error::{Error, Result};
 use crate::geometry::triangle::BLOCK;
 use crate::ray::{Hit, HitPacket, INVALID_ID, PACKET_WIDTH, Ray, RayPacket};
-use crate::simd::Native;
+use crate::simd::{Level, with_level};
 
 /// A built BVH over solids.
 #[derive(Clone, Debug)]
@@ -147,38 +147,51 @@ impl SolidBvh {
             return None;
         }
         let ray = ray.read_fields().clamped_to_zero();
-        with_stack(|stack| match self.box_test {
-            BoxTest::Conservative => self.trace1_on::<ANY, true>(&ray, stack),
-            BoxTest::Fast => self.trace1_on::<ANY, false>(&ray, stack),
+        with_stack(|stack| {
+            with_level!(|L| match self.box_test {
+                BoxTest::Conservative => self.trace1_on::<ANY, true, L>(&ray, stack),
+                BoxTest::Fast => self.trace1_on::<ANY, false, L>(&ray, stack),
+            })
         })
     }
 
     /// [`trace1`](Self::trace1) of a checked ray (valid, `tnear ≥ 0`) on `stack` above its
-    /// entries.
-    pub(crate) fn trace1_on<const ANY: bool, const CONS: bool>(&self, ray: &Ray, stack: &mut Stack) -> Option<Hit> {
+    /// entries, the walk at level `L`.
+    #[inline(never)]
+    pub(crate) fn trace1_on<const ANY: bool, const CONS: bool, L: Level>(
+        &self,
+        ray: &Ray,
+        stack: &mut Stack,
+    ) -> Option<Hit> {
         if self.is_empty() {
             return None;
         }
-        let base = stack.push_root(self.root);
-        let br = BoxRay::<Native>::with_terms(SlabTerms::of(ray), ray.tnear);
-        let mut tfar = ray.tfar;
-        let mut best = None;
-        walk1::<ANY, CONS, Native>(self.tree(), &br, stack, base, &mut tfar, |leaf, tfar, _| {
-            let (start, count) = leaf_blocks(leaf);
-            for block in &self.blocks[start..start + count] {
-                for &s in block.iter().take_while(|&&s| s != u32::MAX) {
-                    if let Some((t, b)) = self.solids[s as usize].first_hit(ray.origin, ray.dir, ray.tnear, *tfar) {
-                        *tfar = t;
-                        best = Some((s, t, b));
-                        if ANY {
-                            return true;
+        L::call(
+            #[inline(always)]
+            || {
+                let base = stack.push_root(self.root);
+                let br = BoxRay::<L>::with_terms(SlabTerms::of(ray), ray.tnear);
+                let mut tfar = ray.tfar;
+                let mut best = None;
+                walk1::<ANY, CONS, L>(self.tree(), &br, stack, base, &mut tfar, |leaf, tfar, _| {
+                    let (start, count) = leaf_blocks(leaf);
+                    for block in &self.blocks[start..start + count] {
+                        for &s in block.iter().take_while(|&&s| s != u32::MAX) {
+                            let solid = &self.solids[s as usize];
+                            if let Some((t, b)) = solid.first_hit_at::<L>(ray.origin, ray.dir, ray.tnear, *tfar) {
+                                *tfar = t;
+                                best = Some((s, t, b));
+                                if ANY {
+                                    return true;
+                                }
+                            }
                         }
                     }
-                }
-            }
-            false
-        });
-        best.map(|(s, t, b)| self.hit_record(s, t, &b, ray))
+                    false
+                });
+                best.map(|(s, t, b)| self.hit_record(s, t, &b, ray))
+            },
+        )
     }
 
     /// Closest hits (`ANY = false`) or occlusion (`ANY = true`) of the active lanes of a packet,
@@ -201,7 +214,7 @@ impl SolidBvh {
     /// [`trace_packet`](Self::trace_packet) on `stack` above its entries, the box test chosen
     /// by the caller: an instance's object walk. Lanes whose object-space rays are not valid
     /// miss.
-    pub(crate) fn trace_packet_on<const ANY: bool, const CONS: bool>(
+    pub(crate) fn trace_packet_on<const ANY: bool, const CONS: bool, L: Level>(
         &self,
         p: &RayPacket,
         hit: &mut HitPacket,
@@ -217,7 +230,7 @@ impl SolidBvh {
             if !ray.is_valid() {
                 continue;
             }
-            if let Some(h) = self.trace1_on::<ANY, CONS>(&ray.clamped_to_zero(), stack) {
+            if let Some(h) = self.trace1_on::<ANY, CONS, L>(&ray.clamped_to_zero(), stack) {
                 mask |= 1 << l;
                 hit.set(l, Some(h));
             }
@@ -253,21 +266,33 @@ impl SolidBvh {
             return;
         }
         let ray = ray.clamped_to_zero();
-        with_stack(|stack| match self.box_test {
-            BoxTest::Conservative => self.each_hit_on::<true>(&ray, stack, &mut f),
-            BoxTest::Fast => self.each_hit_on::<false>(&ray, stack, &mut f),
+        with_stack(|stack| {
+            with_level!(|L| L::call(
+                #[inline(always)]
+                || match self.box_test {
+                    BoxTest::Conservative => self.each_hit_on::<true, L>(&ray, stack, &mut f),
+                    BoxTest::Fast => self.each_hit_on::<false, L>(&ray, stack, &mut f),
+                }
+            ))
         });
     }
 
-    /// [`each_hit`](Self::each_hit) of a checked ray on `stack` above its entries.
-    pub(crate) fn each_hit_on<const CONS: bool>(&self, ray: &Ray, stack: &mut Stack, f: &mut impl FnMut(&Hit)) {
+    /// [`each_hit`](Self::each_hit) of a checked ray on `stack` above its entries, inside the
+    /// caller's [`Level::call`].
+    #[inline(always)]
+    pub(crate) fn each_hit_on<const CONS: bool, L: Level>(
+        &self,
+        ray: &Ray,
+        stack: &mut Stack,
+        f: &mut impl FnMut(&Hit),
+    ) {
         if self.is_empty() {
             return;
         }
         let base = stack.push_root(self.root);
-        let br = BoxRay::<Native>::with_terms(SlabTerms::of(ray), ray.tnear);
+        let br = BoxRay::<L>::with_terms(SlabTerms::of(ray), ray.tnear);
         let mut tfar = ray.tfar;
-        walk1::<false, CONS, Native>(self.tree(), &br, stack, base, &mut tfar, |leaf, tfar, _| {
+        walk1::<false, CONS, L>(self.tree(), &br, stack, base, &mut tfar, |leaf, tfar, _| {
             let (start, count) = leaf_blocks(leaf);
             for block in &self.blocks[start..start + count] {
                 for &s in block.iter().take_while(|&&s| s != u32::MAX) {
@@ -289,7 +314,7 @@ impl SolidBvh {
         let mut best: Option<(u32, f32, Bound)> = None;
         for (s, c) in self.solids.iter().enumerate() {
             let tfar = best.map_or(ray.tfar, |b| b.1);
-            if let Some((t, b)) = c.first_hit(ray.origin, ray.dir, ray.tnear, tfar) {
+            if let Some((t, b)) = with_level!(|L| c.first_hit_at::<L>(ray.origin, ray.dir, ray.tnear, tfar)) {
                 best = Some((s as u32, t, b));
             }
         }

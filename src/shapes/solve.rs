@@ -59,6 +59,7 @@ fn eval<const N: usize>(c: &[f64; N], x: f64) -> (f64, f64) {
 /// The real roots of `c[2] x² + c[1] x + c[0]` in ascending order (the form that does not cancel:
 /// `q = −(b + sign(b)·√Δ)/2`, roots `q/a` and `c/q`); a linear or constant polynomial gives its
 /// one root or none. A double root is returned twice.
+#[inline(always)]
 pub fn quadratic(c: [f64; 3]) -> ([f64; 2], usize) {
     let [c0, b, a] = c;
     if a == 0.0 {
@@ -76,6 +77,7 @@ pub fn quadratic(c: [f64; 3]) -> ([f64; 2], usize) {
 /// The roots of a polynomial in `[lo, hi]` whose critical points are `crit` (ascending; those
 /// not strictly inside the interval add nothing and are skipped): each monotone piece whose ends
 /// differ in sign holds one root.
+#[inline(always)]
 fn between<const N: usize>(c: &[f64; N], crit: &[f64], lo: f64, hi: f64, out: &mut [f64]) -> usize {
     let mut n = 0;
     let mut a = lo;
@@ -104,6 +106,7 @@ fn between<const N: usize>(c: &[f64; N], crit: &[f64], lo: f64, hi: f64, out: &m
 
 /// The one root in `[a, b]`, where `p(a) = fa` and `p(b)` differ in sign and `p` is monotone:
 /// Newton from the bracket's middle, bisecting where a step would leave the bracket.
+#[inline(always)]
 fn root_in<const N: usize>(c: &[f64; N], mut a: f64, mut b: f64, fa: f64) -> f64 {
     let neg_at_a = fa < 0.0;
     let mut x = 0.5 * (a + b);
@@ -134,6 +137,7 @@ fn root_in<const N: usize>(c: &[f64; N], mut a: f64, mut b: f64, fa: f64) -> f64
 }
 
 /// The real roots of the cubic `c` in `[lo, hi]`, ascending, each simple root once.
+#[inline(always)]
 pub fn cubic_in(c: [f64; 4], lo: f64, hi: f64, out: &mut [f64; 3]) -> usize {
     if c[3] == 0.0 {
         let (r, n) = quadratic([c[0], c[1], c[2]]);
@@ -151,6 +155,7 @@ pub fn cubic_in(c: [f64; 4], lo: f64, hi: f64, out: &mut [f64; 3]) -> usize {
 }
 
 /// The real roots of the quartic `c` in `[lo, hi]`, ascending, by [`QuarticSolver::Bracketed`].
+#[inline(always)]
 pub fn quartic_in(c: [f64; 5], lo: f64, hi: f64, out: &mut [f64; 4]) -> usize {
     if c[4] == 0.0 {
         let mut r = [0.0; 3];
@@ -255,6 +260,7 @@ fn sorted_distinct(out: &mut [f64; 4], n: usize) -> usize {
 }
 
 /// The real roots of the quartic `c` in `[lo, hi]` by `solver`, ascending.
+#[inline(always)]
 pub fn quartic(solver: QuarticSolver, c: [f64; 5], lo: f64, hi: f64, out: &mut [f64; 4]) -> usize {
     match solver {
         QuarticSolver::Ferrari => quartic_ferrari(c, lo, hi, out),
