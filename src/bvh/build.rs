@@ -593,8 +593,16 @@ thread_local! {
 }
 
 /// The split of least SAH cost over filled and settled bins: all three axes at once, one per
-/// vector lane.
+/// vector lane. Runs at the active level, as [`bin_into`] does.
 fn sweep(bins: &Bins, cb: &Aabb, scale: Vec3A) -> Option<Split> {
+    with_level!(|L| L::call(
+        #[inline(always)]
+        || sweep_in(bins, cb, scale)
+    ))
+}
+
+#[inline(always)]
+fn sweep_in(bins: &Bins, cb: &Aabb, scale: Vec3A) -> Option<Split> {
     let nb = bins.n;
     // Per bin i: the cost of the right side `A · blocks` of bins >= i (infinite if empty).
     let mut right_cost = [Vec4::ZERO; MAX_BINS];
