@@ -1,7 +1,8 @@
 //! Every instruction-set level this machine runs answers every query like the others: the same
 //! hits, with distances that differ by float rounding only (fused against separate multiply-adds where the crate is compiled without FMA),
 //! for every triangle test and box test, flat and instanced, single rays, packets and streams;
-//! and the same for analytic spheres with every sphere test.
+//! and the same for analytic spheres with every sphere test and for solids with every quartic
+//! solver.
 //!
 //! This file is its own test binary (its own process), so switching the level with
 //! `strahl::simd::set_isa` cannot disturb other tests. The whole suite also runs once per level
@@ -81,6 +82,31 @@ fn same(a: &Answers, b: &Answers, what: &str) {
     }
 }
 
+/// The answers of `flat` and `world` at every level in `levels`, each checked against the
+/// first level's ([`same`]); returns the first level's.
+fn at_every_level<F: Query, W: Query>(
+    levels: &[Isa],
+    flat: &F,
+    world: &W,
+    rays: &[Ray],
+    what: &str,
+) -> (Answers, Answers) {
+    let mut per_level: Vec<(Isa, Answers, Answers)> = levels
+        .iter()
+        .map(|&l| {
+            set_isa(l).unwrap();
+            assert_eq!(isa(), l);
+            (l, answers(flat, rays), answers(world, rays))
+        })
+        .collect();
+    let (l0, flat0, world0) = per_level.remove(0);
+    for (l, f, w) in &per_level {
+        same(&flat0, f, &format!("{what} flat, {l0} vs {l}"));
+        same(&world0, w, &format!("{what} instanced, {l0} vs {l}"));
+    }
+    (flat0, world0)
+}
+
 #[test]
 fn every_level_answers_like_the_compiled_one() {
     let _turn = LEVEL.lock().unwrap_or_else(|e| e.into_inner());
@@ -111,17 +137,7 @@ fn every_level_answers_like_the_compiled_one() {
                 &cfg,
             )
             .unwrap();
-            let mut per_level = Vec::new();
-            for &l in &levels {
-                set_isa(l).unwrap();
-                assert_eq!(isa(), l);
-                per_level.push((l, answers(&scene, &rays), answers(&world, &rays)));
-            }
-            let (l0, flat0, world0) = &per_level[0];
-            for (l, flat, world) in &per_level[1..] {
-                same(flat0, flat, &format!("{test:?}/{box_test:?} flat, {l0} vs {l}"));
-                same(world0, world, &format!("{test:?}/{box_test:?} instanced, {l0} vs {l}"));
-            }
+            let (flat0, _) = at_every_level(&levels, &scene, &world, &rays, &format!("{test:?}/{box_test:?}"));
             // And the compiled level agrees with brute force (the levels' own checks are the suite's).
             for (r, h) in rays.iter().zip(&flat0.single).step_by(7) {
                 assert_same_hit(
@@ -173,19 +189,10 @@ fn every_level_answers_like_the_compiled_one_on_spheres() {
                 ],
             )
             .unwrap();
-            let mut per_level = Vec::new();
-            for &l in &levels {
-                set_isa(l).unwrap();
-                assert_eq!(isa(), l);
-                per_level.push((l, answers(&scene, &rays), answers(&world, &rays)));
-            }
-            let (l0, flat0, world0) = &per_level[0];
+            let what = format!("{test:?}/{box_test:?} spheres");
+            let (flat0, _) = at_every_level(&levels, &scene, &world, &rays, &what);
             let sphere_hits = flat0.single.iter().flatten().filter(|h| h.geom_id >= 1).count();
             assert!(sphere_hits > rays.len() / 10, "{test:?}: only {sphere_hits} sphere hits");
-            for (l, flat, world) in &per_level[1..] {
-                same(flat0, flat, &format!("{test:?}/{box_test:?} spheres flat, {l0} vs {l}"));
-                same(world0, world, &format!("{test:?}/{box_test:?} spheres instanced, {l0} vs {l}"));
-            }
             for (r, h) in rays.iter().zip(&flat0.single).step_by(5) {
                 assert_same_hit(
                     scene.intersect_brute_force(r),
@@ -243,19 +250,11 @@ fn every_level_answers_like_the_compiled_one_on_solids() {
             let cfg = BuildConfig { quartic_solver: solver, box_test, ..BuildConfig::default() };
             let world = file.build(&cfg).unwrap();
             let flat = Scene::build_with_solids(vec![], vec![], file.load_solids().concat(), &cfg).unwrap();
-            let mut per_level = Vec::new();
-            for &l in &levels {
-                set_isa(l).unwrap();
-                per_level.push((l, answers(&flat, &rays), answers(&world, &rays)));
-            }
-            let (l0, flat0, world0) = &per_level[0];
+            let what = format!("{solver:?}/{box_test:?} solids");
+            let (flat0, world0) = at_every_level(&levels, &flat, &world, &rays, &what);
             let solid_hits = world0.single.iter().flatten().count();
             assert!(solid_hits > rays.len() / 5, "{solver:?}: only {solid_hits} hits");
             assert!(flat0.single.iter().flatten().count() > rays.len() / 10, "{solver:?}: flat solids hit");
-            for (l, flat, world) in &per_level[1..] {
-                same(flat0, flat, &format!("{solver:?}/{box_test:?} solids flat, {l0} vs {l}"));
-                same(world0, world, &format!("{solver:?}/{box_test:?} solids instanced, {l0} vs {l}"));
-            }
         }
     }
 }
