@@ -39,6 +39,9 @@ pub struct EmbreeBackend {
     sphere_from: Vec<(u32, bool)>,
     /// Streams through `rtcIntersect16`/`rtcOccluded16` instead of the `1M` calls.
     packets: AtomicBool,
+    /// Whether coherent occlusion queries get Embree's coherent flag (see
+    /// [`coherent_occlusion`]).
+    coherent_occlusion: bool,
     _device: Device,
 }
 
@@ -120,7 +123,7 @@ impl EmbreeBackend {
         solids: &[Vec<strahl::Solid>],
         instances: &[Instance],
     ) -> anyhow::Result<Self> {
-        let device = Device::new(render_device_config())?;
+        let device = Device::new("threads=2")?;
         let xfms: Vec<(usize, [f32; 12])> = instances.iter().map(|i| (i.object, column_major(&i.transform))).collect();
         let prepared = solids
             .iter()
@@ -136,7 +139,14 @@ impl EmbreeBackend {
                 (meshes, i.transform.matrix3.determinant() < 0.0)
             })
             .collect();
-        Ok(Self { scene, cofactor, sphere_from, packets: AtomicBool::new(false), _device: device })
+        Ok(Self {
+            scene,
+            cofactor,
+            sphere_from,
+            packets: AtomicBool::new(false),
+            coherent_occlusion: coherent_occlusion(),
+            _device: device,
+        })
     }
 
     /// Answers streams through `rtcIntersect16`/`rtcOccluded16` on runs of 16 consecutive rays
@@ -267,7 +277,7 @@ impl EmbreeBackend {
             for k in (0..n).step_by(16) {
                 let m = (n - k).min(16);
                 let (mut p, valid) = stream_packet(rays, start + k, m);
-                self.scene.occluded16(&valid, &mut p.ray, coherent);
+                self.scene.occluded16(&valid, &mut p.ray, coherent && self.coherent_occlusion);
                 for l in 0..m {
                     out[k + l] = p.ray.tfar[l] == f32::NEG_INFINITY;
                 }
@@ -277,7 +287,7 @@ impl EmbreeBackend {
         RAY_BUF.with_borrow_mut(|buf| {
             buf.clear();
             buf.extend((start..start + out.len()).map(|k| embree_ray_of(&rays.get(k), k as u32)));
-            self.scene.occluded1m(buf, coherent);
+            self.scene.occluded1m(buf, coherent && self.coherent_occlusion);
             for (o, r) in out.iter_mut().zip(buf.iter()) {
                 *o = r.tfar == f32::NEG_INFINITY;
             }
@@ -533,16 +543,22 @@ pub fn table(rows: &[RenderRow], threads: usize, passes: usize) -> String {
     s
 }
 
-/// The Embree device configuration of the render backend: `threads=2`, and on AMD Zen 5 (family
-/// 26) `isa=avx2` unless `EMBREE_ISA` says otherwise. Embree 3.13.5's AVX-512 code hung there in
-/// the render backend (measured 2026-11-27 on an AMD EPYC family 26: the Whitted frame spun in
-/// libembree3 for over an hour; with `isa=avx2` it rendered in 3.8 s); the kernel harness's AVX-512
-/// queries ran normally on the same machine.
-fn render_device_config() -> &'static str {
-    let zen5 = std::env::var_os("EMBREE_ISA").is_none()
-        && std::fs::read_to_string("/proc/cpuinfo").is_ok_and(|c| {
-            c.contains("AuthenticAMD")
-                && c.lines().any(|l| l.starts_with("cpu family") && l.trim_end().ends_with(": 26"))
-        });
-    if zen5 { "threads=2,isa=avx2" } else { "threads=2" }
+/// Whether occlusion queries may be given Embree's coherent flag. Not where Embree runs its
+/// 16-wide AVX-512 kernels: their coherent occlusion path (`occludedCoherent`, the frustum walk,
+/// which `rtcOccluded16` and, through its conversion to packets, `rtcOccluded1M` take) hung in
+/// Embree 3.13.5 on the render scenes' bounce-0 shadow rays (AMD EPYC family 26, Zen 5: the
+/// Whitted frame once spun for over an hour; when retried, the Whitted and Cornell frames had
+/// not finished after 60 to 240 s, in `rtcOccluded16` and in `rtcOccluded1M`; with the
+/// incoherent flag, or with `isa=avx2`, each renders in well under a second). Closest-hit
+/// queries keep the flag. `EMBREE_ISA` naming a narrower ISA than AVX-512 restores it.
+fn coherent_occlusion() -> bool {
+    let narrower = std::env::var("EMBREE_ISA").is_ok_and(|i| !i.trim().is_empty() && !i.contains("avx512"));
+    #[cfg(target_arch = "x86_64")]
+    let avx512 = std::arch::is_x86_feature_detected!("avx512f")
+        && std::arch::is_x86_feature_detected!("avx512vl")
+        && std::arch::is_x86_feature_detected!("avx512bw")
+        && std::arch::is_x86_feature_detected!("avx512dq");
+    #[cfg(not(target_arch = "x86_64"))]
+    let avx512 = false;
+    narrower || !avx512
 }
