@@ -128,6 +128,50 @@ impl Light {
         Some((Incident { color: inc.color * share, ..inc }, Some(target)))
     }
 
+    /// Every sample of the light seen from `p`, in the order of [`sample`](Self::sample)'s `s`
+    /// and with the same arithmetic (so the same answers from the same `rng`): `f` gets what
+    /// arrives and the point the shadow feeler must reach, for each sample that sends light.
+    /// The strata's indices, the sample's share and a disc's orientation are worked out once per
+    /// call instead of once per sample (this runs for every lit point and light).
+    #[inline]
+    pub fn each_sample(&self, p: Vec3, rng: &mut Pcg32, mut f: impl FnMut(Incident, Option<Vec3>)) {
+        let share = 1.0 / self.samples() as f32;
+        let mut emit = |target: Vec3| {
+            if let Some(inc) = self.arriving(p, target) {
+                f(Incident { color: inc.color * share, ..inc }, Some(target));
+            }
+        };
+        match self.kind {
+            LightKind::Rect { u, v, n } => {
+                let (n0, n1) = (n[0] as f32, n[1] as f32);
+                for j in 0..n[1] {
+                    for i in 0..n[0] {
+                        let (a, b) = (i as f32 + rng.next_f32(), j as f32 + rng.next_f32());
+                        emit(self.position + u * (a / n0 - 0.5) + v * (b / n1 - 0.5));
+                    }
+                }
+            }
+            LightKind::Sphere { radius, n } => {
+                let rings = (n as f32).sqrt().ceil() as u32;
+                let per = n.div_ceil(rings);
+                let w = (p - self.position).normalize_or(Vec3::Y);
+                let e1 = w.any_orthonormal_vector();
+                let e2 = w.cross(e1);
+                for s in 0..n {
+                    let (ring, k) = (s / per, s % per);
+                    let r = radius * ((ring as f32 + rng.next_f32()) / rings as f32).sqrt();
+                    let phi = std::f32::consts::TAU * (k as f32 + rng.next_f32()) / per as f32;
+                    emit(self.position + (e1 * phi.cos() + e2 * phi.sin()) * r);
+                }
+            }
+            _ => {
+                if let Some((inc, target)) = self.sample(p, 0, rng) {
+                    f(inc, target);
+                }
+            }
+        }
+    }
+
     /// What a light at `target` (its position, or a sample of its area) sends to `p`.
     #[inline(always)]
     fn arriving(&self, p: Vec3, target: Vec3) -> Option<Incident> {
@@ -274,6 +318,36 @@ mod tests {
         assert!(Light { kind: LightKind::Rect { u: Vec3::X, v: Vec3::Z, n: [0, 2] }, ..rect }.check().is_err());
         assert!(Light { kind: LightKind::Sphere { radius: 0.0, n: 4 }, ..rect }.check().is_err());
         assert!(Light { kind: LightKind::Sphere { radius: 1.0, n: 5000 }, ..rect }.check().is_err());
+    }
+
+    /// `each_sample` hands out exactly what `sample` answers for `s = 0, 1, …` from the same
+    /// generator, skipping the samples that send no light (here: the light's own position).
+    #[test]
+    fn each_sample_matches_sample_by_sample() {
+        let base = Light {
+            position: Vec3::new(0.5, 3.0, -1.0),
+            color: Vec3::new(1.0, 0.5, 0.25),
+            kind: LightKind::Point,
+            fade: Some(2.0),
+        };
+        let lights = [
+            base,
+            Light { kind: LightKind::Rect { u: Vec3::X * 2.0, v: Vec3::new(0.0, 0.5, 1.5), n: [5, 3] }, ..base },
+            Light { kind: LightKind::Sphere { radius: 0.7, n: 10 }, ..base },
+            Light { kind: LightKind::Directional { direction: Vec3::NEG_Y }, ..base },
+            Light { kind: LightKind::Spot { direction: Vec3::NEG_Y, cos_inner: 0.9, cos_outer: 0.5 }, ..base },
+        ];
+        for light in lights {
+            for p in [Vec3::ZERO, Vec3::new(3.0, -2.0, 7.0), base.position] {
+                let mut one = Pcg32::new(7, 3);
+                let expected: Vec<_> = (0..light.samples()).filter_map(|s| light.sample(p, s, &mut one)).collect();
+                let mut all = Pcg32::new(7, 3);
+                let mut got = Vec::new();
+                light.each_sample(p, &mut all, |inc, target| got.push((inc, target)));
+                assert_eq!(got, expected, "{:?} at {p}", light.kind);
+                assert_eq!(all.next_u32(), one.next_u32(), "both drew as many numbers");
+            }
+        }
     }
 
     #[test]

@@ -183,17 +183,16 @@ pub fn shade(
         // Area lights' strata are jittered by a generator seeded with the path and the light,
         // so the image depends neither on the order of shading nor on the backend.
         let mut rng = Pcg32::new(path.seed, li as u64);
-        for s in 0..light.samples() {
-            let Some((inc, target)) = light.sample(sp.p, s, &mut rng) else { continue };
+        light.each_sample(sp.p, &mut rng, |inc, target| {
             let cos = ns.dot(inc.dir);
             if cos <= 0.0 || n_face.dot(inc.dir) <= 0.0 {
-                continue;
+                return;
             }
             let r = reflect(-inc.dir, ns);
             let spec = if mat.specular == Vec3::ZERO { 0.0 } else { r.dot(-d).max(0.0).powf(mat.shininess) };
             let radiance = weight * inc.color * (kd * cos + mat.specular * spec);
             if radiance.max_element() <= 0.0 {
-                continue;
+                return;
             }
             let ray = match target {
                 // The segment to the light: t in (0, 1) of the unnormalized direction.
@@ -201,7 +200,7 @@ pub fn shade(
                 None => Ray::new(shadow_origin, inc.dir),
             };
             emit(Emission::Shadow { ray, radiance, light: li as u32 });
-        }
+        });
     }
 
     // Reflection and refraction.
