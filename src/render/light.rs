@@ -108,7 +108,8 @@ impl Light {
             LightKind::Point | LightKind::Spot { .. } => self.position,
             LightKind::Rect { u, v, n } => {
                 let (a, b) = ((s % n[0]) as f32 + rng.next_f32(), (s / n[0]) as f32 + rng.next_f32());
-                self.position + u * (a / n[0] as f32 - 0.5) + v * (b / n[1] as f32 - 0.5)
+                let (du, dv) = (u / n[0] as f32, v / n[1] as f32);
+                self.position - 0.5 * (u + v) + du * a + dv * b
             }
             LightKind::Sphere { radius, n } => {
                 // Equal-area strata of the disc: rings by r², then the angle.
@@ -129,7 +130,8 @@ impl Light {
     }
 
     /// Every sample of the light seen from `p`, in the order of [`sample`](Self::sample)'s `s`
-    /// and with the same arithmetic (so the same answers from the same `rng`): `f` gets what
+    /// and with the same arithmetic (so the same answers from the same `rng`; a test holds them
+    /// equal): `f` gets what
     /// arrives and the point the shadow feeler must reach, for each sample that sends light.
     /// The strata's indices, the sample's share and a disc's orientation are worked out once per
     /// call instead of once per sample (this runs for every lit point and light).
@@ -143,11 +145,13 @@ impl Light {
         };
         match self.kind {
             LightKind::Rect { u, v, n } => {
-                let (n0, n1) = (n[0] as f32, n[1] as f32);
+                // The corner and one stratum's edges: a sample is `corner + du·a + dv·b`.
+                let (du, dv) = (u / n[0] as f32, v / n[1] as f32);
+                let corner = self.position - 0.5 * (u + v);
                 for j in 0..n[1] {
                     for i in 0..n[0] {
                         let (a, b) = (i as f32 + rng.next_f32(), j as f32 + rng.next_f32());
-                        emit(self.position + u * (a / n0 - 0.5) + v * (b / n1 - 0.5));
+                        emit(corner + du * a + dv * b);
                     }
                 }
             }
