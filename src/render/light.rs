@@ -106,6 +106,8 @@ impl Light {
         let target = match self.kind {
             LightKind::Directional { .. } => return self.incident(p).map(|i| (i, None)),
             LightKind::Point | LightKind::Spot { .. } => self.position,
+            // No strata (a light that `check` rejects): no sample, rather than a division by zero.
+            LightKind::Rect { n: [0, _] | [_, 0], .. } | LightKind::Sphere { n: 0, .. } => return None,
             LightKind::Rect { u, v, n } => {
                 let (a, b) = ((s % n[0]) as f32 + rng.next_f32(), (s / n[0]) as f32 + rng.next_f32());
                 let (du, dv) = (u / n[0] as f32, v / n[1] as f32);
@@ -155,6 +157,7 @@ impl Light {
                     }
                 }
             }
+            LightKind::Sphere { n: 0, .. } => {}
             LightKind::Sphere { radius, n } => {
                 let rings = (n as f32).sqrt().ceil() as u32;
                 let per = n.div_ceil(rings);
@@ -351,6 +354,13 @@ mod tests {
                 assert_eq!(got, expected, "{:?} at {p}", light.kind);
                 assert_eq!(all.next_u32(), one.next_u32(), "both drew as many numbers");
             }
+        }
+        // Lights without strata (rejected by `check`, but their fields are public) send nothing.
+        for kind in [LightKind::Sphere { radius: 1.0, n: 0 }, LightKind::Rect { u: Vec3::X, v: Vec3::Z, n: [0, 3] }] {
+            let l = Light { kind, ..base };
+            let mut rng = Pcg32::new(1, 1);
+            assert!(l.sample(Vec3::ZERO, 0, &mut rng).is_none());
+            l.each_sample(Vec3::ZERO, &mut rng, |_, _| panic!("no samples expected"));
         }
     }
 
