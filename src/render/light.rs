@@ -131,12 +131,12 @@ impl Light {
         Some((Incident { color: inc.color * share, ..inc }, Some(target)))
     }
 
-    /// Every sample of the light seen from `p`, in the order of [`sample`](Self::sample)'s `s`
-    /// and with the same arithmetic (so the same answers from the same `rng`; a test holds them
-    /// equal): `f` gets what
-    /// arrives and the point the shadow feeler must reach, for each sample that sends light.
-    /// The strata's indices, the sample's share and a disc's orientation are worked out once per
-    /// call instead of once per sample (this runs for every lit point and light).
+    /// Every sample of the light seen from `p`: `f` gets what arrives and the point the shadow
+    /// feeler must reach, for each sample that sends light. The order and the arithmetic are
+    /// [`sample`](Self::sample)'s for `s = 0, 1, …`, so the answers from the same `rng` are the
+    /// same (a test holds them equal); the strata's indices, the sample's share and a disc's
+    /// orientation are worked out once per call instead of once per sample (this runs for every
+    /// lit point and light). The disc's stratum arithmetic repeats `sample`'s: keep the two alike.
     #[inline]
     pub fn each_sample(&self, p: Vec3, rng: &mut Pcg32, mut f: impl FnMut(Incident, Option<Vec3>)) {
         let share = 1.0 / self.samples() as f32;
