@@ -7,7 +7,7 @@
 //! thread-local buffers reused across calls) and call `rtcIntersect1M`/`rtcOccluded1M`, and write
 //! the answers back. The first bounce (camera rays and their shadow feelers) gets Embree's
 //! coherent flag, later bounces the incoherent one; occlusion queries never get it where Embree
-//! runs AVX-512 (see [`coherent_occlusion`]).
+//! runs AVX-512 (see `coherent_occlusion`).
 //! The conversion is part of Embree's time here, as reading the stream is part of strahl's.
 //! [`EmbreeBackend::set_packets`] switches the streams to `rtcIntersect16`/`rtcOccluded16` on
 //! runs of 16 consecutive rays (a 4×4 tile of camera rays), the API the kernel harness found
