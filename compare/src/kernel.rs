@@ -11,7 +11,10 @@
 //! The answers are read back after the timed region ([`StrahlNative::answers`],
 //! [`EmbreeNative::answers`]).
 
+use std::time::Instant;
+
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
 use strahl::{Hit, HitPacket, HitStream, PACKET_WIDTH, Query, Ray, RayPacket, RayStream};
 
 use crate::embree::{self, RTCRay, RTCRay16, RTCRayHit, RTCRayHit16};
@@ -108,6 +111,105 @@ impl StrahlNative {
             };
             out.set(i, a);
         }
+    }
+}
+
+/// One API's median speed on both engines.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct ApiTimes {
+    pub api: String,
+    /// Median Mrays/s over the passes.
+    pub strahl: f64,
+    pub embree: f64,
+}
+
+/// The three APIs' names, in the order [`Timed`] indexes them.
+pub const API_NAMES: [&str; 3] = ["single", "packet", "stream"];
+
+/// One ray set traced in kernel mode on both engines, interleaved: one warm-up pass, then
+/// `passes` timed ones; each pass times the three APIs, each API both engines, the engine
+/// that goes first alternating pass by pass, so that the machine's drift falls on both alike.
+pub struct Timed {
+    /// Seconds per timed pass, `[engine][api]` (engine 0 strahl, 1 Embree).
+    pub secs: [[Vec<f64>; 3]; 2],
+    /// Each engine's answers from its last stream pass.
+    pub answers: [Answers; 2],
+}
+
+impl Timed {
+    pub fn run<Q: Query + Sync>(
+        scene: &Q,
+        escene: &embree::Scene,
+        rays: &RayStream,
+        class: Class,
+        passes: usize,
+        pool: &rayon::ThreadPool,
+    ) -> Self {
+        let n = rays.len();
+        let mut sn = StrahlNative::new(rays);
+        let mut en = EmbreeNative::new(rays);
+        let mut secs: [[Vec<f64>; 3]; 2] = Default::default();
+        let mut answers = [Answers::misses(n), Answers::misses(n)];
+        for pass in 0..=passes {
+            for api in 0..3 {
+                let order = if pass % 2 == 0 { [0, 1] } else { [1, 0] };
+                for engine in order {
+                    if engine == 1 {
+                        en.refresh(class, api);
+                    }
+                    let start = Instant::now();
+                    pool.install(|| match (engine, api) {
+                        (0, 0) => sn.single(scene, class),
+                        (0, 1) => sn.packet(scene, class),
+                        (0, _) => sn.stream(scene, class),
+                        (_, 0) => en.single(escene, class),
+                        (_, 1) => en.packet(escene, class),
+                        _ => en.stream(escene, class),
+                    });
+                    let t = start.elapsed().as_secs_f64();
+                    if pass > 0 {
+                        secs[engine][api].push(t);
+                    }
+                    if pass == passes && api == 2 {
+                        if engine == 0 {
+                            sn.answers(class, api, &mut answers[0]);
+                        } else {
+                            en.answers(class, api, &mut answers[1]);
+                        }
+                    }
+                }
+            }
+        }
+        Self { secs, answers }
+    }
+
+    fn median(&self, engine: usize, api: usize) -> f64 {
+        let mut s = self.secs[engine][api].clone();
+        s.sort_by(f64::total_cmp);
+        s.get(s.len() / 2).copied().unwrap_or(f64::NAN)
+    }
+
+    /// Median Mrays/s of each API on both engines, for `n` rays.
+    pub fn apis(&self, n: usize) -> Vec<ApiTimes> {
+        (0..3)
+            .map(|a| ApiTimes {
+                api: API_NAMES[a].to_string(),
+                strahl: n as f64 / self.median(0, a) / 1e6,
+                embree: n as f64 / self.median(1, a) / 1e6,
+            })
+            .collect()
+    }
+
+    /// Each engine's best API (by median time).
+    pub fn best(&self, engine: usize) -> usize {
+        (0..3).min_by(|&a, &b| self.median(engine, a).total_cmp(&self.median(engine, b))).unwrap_or(2)
+    }
+
+    /// Per timed pass: Embree's time with its best API over strahl's with its best (above 1:
+    /// strahl faster).
+    pub fn best_ratios(&self) -> Vec<f64> {
+        let (bs, be) = (self.best(0), self.best(1));
+        self.secs[0][bs].iter().zip(&self.secs[1][be]).map(|(s, e)| e / s).collect()
     }
 }
 

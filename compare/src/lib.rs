@@ -23,6 +23,7 @@ pub mod rayfile;
 pub mod render;
 pub mod report;
 pub mod scenes;
+pub mod solids;
 pub mod spheres;
 pub mod torus;
 

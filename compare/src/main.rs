@@ -89,6 +89,12 @@ struct Args {
     /// implicit_metaballs.png to --out, then exits.
     #[arg(long)]
     implicit: bool,
+    /// Solid families (issue 30) in kernel mode: 512 placed solids per family (quadrics, torus,
+    /// superquadrics, blob, CSG) as strahl solids and as Embree user geometry running the same
+    /// intersection code, on the same primary, shadow and diffuse rays, the three APIs each;
+    /// writes solids.md and solids.json to --out, then exits.
+    #[arg(long)]
+    solids: bool,
     /// Redraw the charts of --spheres, --torus or --implicit into --out from their JSON report
     /// (spheres.json, torus.json or implicit.json), without measuring.
     #[arg(long, alias = "spheres-charts-from")]
@@ -177,6 +183,11 @@ fn main() -> anyhow::Result<()> {
     if args.implicit {
         let r = compare::implicit::run(args.width as usize, args.passes, &pool, &args.out)?;
         print!("{}", compare::implicit::markdown(&r));
+        return Ok(());
+    }
+    if args.solids {
+        let r = compare::solids::run(args.width as usize, args.passes, &pool, &args.out)?;
+        print!("{}", compare::solids::markdown(&r));
         return Ok(());
     }
     if args.torus {

@@ -30,8 +30,9 @@ use strahl::{
 };
 
 use crate::embree;
-use crate::harness::{Answers, Class, quartiles};
-use crate::kernel::{EmbreeNative, StrahlNative};
+use crate::harness::{Class, quartiles};
+pub use crate::kernel::ApiTimes;
+use crate::kernel::Timed;
 
 /// Settings of a sphere run.
 pub struct Settings {
@@ -41,14 +42,6 @@ pub struct Settings {
     pub width: u32,
     /// Timed passes per engine and API.
     pub passes: usize,
-}
-
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct ApiTimes {
-    pub api: String,
-    /// Median Mrays/s over the passes.
-    pub strahl: f64,
-    pub embree: f64,
 }
 
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -299,57 +292,9 @@ fn engine_class(
     pool: &rayon::ThreadPool,
 ) -> EngineClass {
     let n = rays.len();
-    let mut sn = StrahlNative::new(rays);
-    let mut en = EmbreeNative::new(rays);
-    let mut secs = [[Vec::new(), Vec::new(), Vec::new()], [Vec::new(), Vec::new(), Vec::new()]];
-    let mut answers: [Answers; 2] = [Answers::misses(n), Answers::misses(n)];
-    for pass in 0..=passes {
-        for api in 0..3 {
-            let order = if pass % 2 == 0 { [0, 1] } else { [1, 0] };
-            for engine in order {
-                if engine == 1 {
-                    en.refresh(class, api);
-                }
-                let start = Instant::now();
-                pool.install(|| match (engine, api) {
-                    (0, 0) => sn.single(scene, class),
-                    (0, 1) => sn.packet(scene, class),
-                    (0, _) => sn.stream(scene, class),
-                    (_, 0) => en.single(escene, class),
-                    (_, 1) => en.packet(escene, class),
-                    _ => en.stream(escene, class),
-                });
-                let t = start.elapsed().as_secs_f64();
-                if pass > 0 {
-                    secs[engine][api].push(t);
-                }
-                if pass == passes && api == 2 {
-                    if engine == 0 {
-                        sn.answers(class, api, &mut answers[0]);
-                    } else {
-                        en.answers(class, api, &mut answers[1]);
-                    }
-                }
-            }
-        }
-    }
-    let median = |v: &Vec<f64>| {
-        let mut s = v.clone();
-        s.sort_by(f64::total_cmp);
-        s[s.len() / 2]
-    };
-    let names = ["single", "packet", "stream"];
-    let apis = (0..3)
-        .map(|a| ApiTimes {
-            api: names[a].to_string(),
-            strahl: n as f64 / median(&secs[0][a]) / 1e6,
-            embree: n as f64 / median(&secs[1][a]) / 1e6,
-        })
-        .collect::<Vec<_>>();
-    // Per pass: best API of each engine (by median), ratio of that pass's times.
-    let best = |e: usize| (0..3).min_by(|&a, &b| median(&secs[e][a]).total_cmp(&median(&secs[e][b]))).unwrap_or(2);
-    let (bs, be) = (best(0), best(1));
-    let ratios: Vec<f64> = secs[0][bs].iter().zip(&secs[1][be]).map(|(s, e)| e / s).collect();
+    let timed = Timed::run(scene, escene, rays, class, passes, pool);
+    let (apis, ratios) = (timed.apis(n), timed.best_ratios());
+    let answers = timed.answers;
     let [s, e] = &answers;
     let (mut agree, mut both, mut same, mut se, mut ee, mut ties) = (0, 0, 0, 0, 0, 0);
     let (mut s_err, mut e_err) = (Vec::new(), Vec::new());
