@@ -95,6 +95,9 @@ struct Args {
     /// writes solids.md and solids.json to --out, then exits.
     #[arg(long)]
     solids: bool,
+    /// With --solids: only these families (by the report's names, e.g. `box,torus,CSG die`).
+    #[arg(long, value_delimiter = ',')]
+    families: Vec<String>,
     /// Redraw the charts of --spheres, --torus or --implicit into --out from their JSON report
     /// (spheres.json, torus.json or implicit.json), without measuring.
     #[arg(long, alias = "spheres-charts-from")]
@@ -186,7 +189,7 @@ fn main() -> anyhow::Result<()> {
         return Ok(());
     }
     if args.solids {
-        let r = compare::solids::run(args.width as usize, args.passes, &pool, &args.out)?;
+        let r = compare::solids::run(args.width as usize, args.passes, &args.families, &pool, &args.out)?;
         print!("{}", compare::solids::markdown(&r));
         return Ok(());
     }

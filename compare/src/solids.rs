@@ -154,7 +154,19 @@ fn lattice(shape: &Solid, seed: u64) -> Vec<Solid> {
     out
 }
 
-pub fn run(width: usize, passes: usize, pool: &rayon::ThreadPool, out: &Path) -> anyhow::Result<SolidsReport> {
+/// Runs the families named in `only` (all when empty); an unknown name is an error.
+pub fn run(
+    width: usize,
+    passes: usize,
+    only: &[String],
+    pool: &rayon::ThreadPool,
+    out: &Path,
+) -> anyhow::Result<SolidsReport> {
+    let all = families();
+    if let Some(bad) = only.iter().find(|o| !all.iter().any(|(n, _)| n == o)) {
+        let names: Vec<&str> = all.iter().map(|(n, _)| *n).collect();
+        anyhow::bail!("--families: no family {bad:?}; the families are {}", names.join(", "));
+    }
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let device = embree::Device::new(&format!("threads={}", pool.current_num_threads()))?;
     let w = width as u32;
@@ -162,7 +174,10 @@ pub fn run(width: usize, passes: usize, pool: &rayon::ThreadPool, out: &Path) ->
     let light = Vec3::new(-6.0, 20.0, 10.0);
     let cfg = BuildConfig::default();
     let mut families_out = Vec::new();
-    for (seed, (name, shape)) in families().into_iter().enumerate() {
+    for (seed, (name, shape)) in all.into_iter().enumerate() {
+        if !only.is_empty() && !only.iter().any(|o| o == name) {
+            continue;
+        }
         eprintln!("solids: {name}");
         let solids = lattice(&shape, seed as u64);
         let prepared =
