@@ -13,12 +13,12 @@ use super::primitive::Bound;
 use super::solve::QuarticSolver;
 use crate::bvh::build::{self, Aabb, PrimRef};
 use crate::bvh::node::{EMPTY, Node, leaf_blocks};
-use crate::bvh::traverse::{BoxRay, SlabTerms, Stack, Tree, walk1, with_stack};
+use crate::bvh::traverse::{BoxRay, PacketBoxes, PacketHits, SlabTerms, Stack, Tree, walk_packet, walk1, with_stack};
 use crate::bvh::{BoxTest, BuildConfig, BuildStats, PlacedTree, place_tree};
 use crate::error::{Error, Result};
 use crate::geometry::triangle::BLOCK;
 use crate::ray::{Hit, HitPacket, INVALID_ID, PACKET_WIDTH, Ray, RayPacket};
-use crate::simd::{Level, with_level};
+use crate::simd::*;
 
 /// A built BVH over solids.
 #[derive(Clone, Debug)]
@@ -169,73 +169,155 @@ impl SolidBvh {
         L::call(
             #[inline(always)]
             || {
-                let base = stack.push_root(self.root);
-                let br = BoxRay::<L>::with_terms(SlabTerms::of(ray), ray.tnear);
-                let mut tfar = ray.tfar;
-                let mut best = None;
-                walk1::<ANY, CONS, L>(self.tree(), &br, stack, base, &mut tfar, |leaf, tfar, _| {
-                    let (start, count) = leaf_blocks(leaf);
-                    for block in &self.blocks[start..start + count] {
-                        for &s in block.iter().take_while(|&&s| s != u32::MAX) {
-                            let solid = &self.solids[s as usize];
-                            if let Some((t, b)) = solid.first_hit_at::<L>(ray.origin, ray.dir, ray.tnear, *tfar) {
-                                *tfar = t;
-                                best = Some((s, t, b));
-                                if ANY {
-                                    return true;
-                                }
-                            }
-                        }
-                    }
-                    false
-                });
+                let best = self.walk_from::<ANY, CONS, L>(ray, SlabTerms::of(ray), self.root, stack);
                 best.map(|(s, t, b)| self.hit_record(s, t, &b, ray))
             },
         )
     }
 
-    /// Closest hits (`ANY = false`) or occlusion (`ANY = true`) of the active lanes of a packet,
-    /// lane by lane, into `hit` (every lane rewritten); returns the lanes that hit.
-    pub fn trace_packet<const ANY: bool>(&self, p: &RayPacket, hit: &mut HitPacket) -> u32 {
-        *hit = HitPacket::default();
-        let mut mask = 0;
-        let mut bits = p.active & crate::simd::low_bits(PACKET_WIDTH);
-        while bits != 0 {
-            let l = bits.trailing_zeros() as usize;
-            bits &= bits - 1;
-            if let Some(h) = self.trace1::<ANY>(&p.get(l)) {
-                mask |= 1 << l;
-                hit.set(l, Some(h));
+    /// The walk of one checked ray over the subtree at `root`: the solid hit, `t` and the
+    /// crossing.
+    #[inline(always)]
+    fn walk_from<const ANY: bool, const CONS: bool, L: Level>(
+        &self,
+        ray: &Ray,
+        terms: SlabTerms,
+        root: u32,
+        stack: &mut Stack,
+    ) -> Option<(u32, f32, Bound)> {
+        let base = stack.push_root(root);
+        let br = BoxRay::<L>::with_terms(terms, ray.tnear);
+        let mut tfar = ray.tfar;
+        let mut best = None;
+        walk1::<ANY, CONS, L>(self.tree(), &br, stack, base, &mut tfar, |leaf, tfar, _| {
+            let (start, count) = leaf_blocks(leaf);
+            for block in &self.blocks[start..start + count] {
+                for &s in block.iter().take_while(|&&s| s != u32::MAX) {
+                    let solid = &self.solids[s as usize];
+                    if let Some((t, b)) = solid.first_hit_at::<L>(ray.origin, ray.dir, ray.tnear, *tfar) {
+                        *tfar = t;
+                        best = Some((s, t, b));
+                        if ANY {
+                            return true;
+                        }
+                    }
+                }
             }
-        }
-        mask
+            false
+        });
+        best
     }
 
-    /// [`trace_packet`](Self::trace_packet) on `stack` above its entries, the box test chosen
-    /// by the caller: an instance's object walk. Lanes whose object-space rays are not valid
-    /// miss.
+    /// Closest hits (`ANY = false`) or occlusion (`ANY = true`) of the active lanes of a packet
+    /// into `hit` (every lane rewritten); returns the lanes that hit. Invalid rays miss.
+    ///
+    /// The packet walks the tree as a triangle packet does (its frustum, or per-lane node tests
+    /// and single rays for subtrees few lanes enter); at a leaf, each solid is tested, one lane
+    /// at a time, for the lanes whose rays enter the solid's box (Embree hands a user
+    /// geometry's callback a packet's lanes the same way).
+    pub fn trace_packet<const ANY: bool>(&self, p: &RayPacket, hit: &mut HitPacket) -> u32 {
+        let mut out = PacketHits::new(hit);
+        if !self.is_empty() {
+            with_stack(|stack| {
+                with_level!(|L| match self.box_test {
+                    BoxTest::Conservative => self.trace_packet_with::<ANY, true, L>(p, &mut out, stack),
+                    BoxTest::Fast => self.trace_packet_with::<ANY, false, L>(p, &mut out, stack),
+                })
+            });
+        }
+        out.mask
+    }
+
+    #[inline(never)]
+    fn trace_packet_with<const ANY: bool, const CONS: bool, L: Level>(
+        &self,
+        p: &RayPacket,
+        out: &mut PacketHits<'_>,
+        stack: &mut Stack,
+    ) {
+        L::call(
+            #[inline(always)]
+            || self.trace_packet_in::<ANY, CONS, L>(p, out, stack),
+        )
+    }
+
+    /// [`trace_packet_with`](Self::trace_packet_with)'s body, compiled for the level.
+    #[inline(always)]
+    fn trace_packet_in<const ANY: bool, const CONS: bool, L: Level>(
+        &self,
+        p: &RayPacket,
+        out: &mut PacketHits<'_>,
+        stack: &mut Stack,
+    ) {
+        let Some((pb, mut tfar)) = PacketBoxes::<L>::new(p) else {
+            return;
+        };
+        // Each lane's checked ray, and its closest crossing so far (normals made once, at the end).
+        let rays: [Ray; PACKET_WIDTH] = std::array::from_fn(|l| p.get(l).clamped_to_zero());
+        let mut best: [Option<(u32, Bound)>; PACKET_WIDTH] = [None; PACKET_WIDTH];
+        let base = stack.push_root(self.root);
+        let leaf_walk = hot!(|leaf: u32, lanes: u32, tfar: &mut L::Pf, stack: &mut Stack| {
+            let mut t = tfar.to_array();
+            let mut bits = lanes;
+            while bits != 0 {
+                // Few lanes entered this subtree: each walks it alone.
+                let l = bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                let ray = Ray { tfar: t[l], ..rays[l] };
+                if let Some((s, th, b)) = self.walk_from::<ANY, CONS, L>(&ray, pb.slabs.lane(l), leaf, stack) {
+                    out.mask |= 1 << l;
+                    t[l] = if ANY { f32::NEG_INFINITY } else { th };
+                    best[l] = Some((s, b));
+                }
+            }
+            if lanes == 0 {
+                let (start, count) = leaf_blocks(leaf);
+                for block in &self.blocks[start..start + count] {
+                    for &s in block.iter().take_while(|&&s| s != u32::MAX) {
+                        let solid = &self.solids[s as usize];
+                        let (lo, hi) = solid.bounds;
+                        let mut bits = pb.lanes_in_box::<CONS>(lo.to_array(), hi.to_array(), L::Pf::new(t));
+                        while bits != 0 {
+                            let l = bits.trailing_zeros() as usize;
+                            bits &= bits - 1;
+                            let r = &rays[l];
+                            if let Some((th, b)) = solid.first_hit_at::<L>(r.origin, r.dir, r.tnear, t[l]) {
+                                out.mask |= 1 << l;
+                                t[l] = if ANY { f32::NEG_INFINITY } else { th };
+                                best[l] = Some((s, b));
+                            }
+                        }
+                    }
+                }
+            }
+            *tfar = L::Pf::new(t);
+            ANY && out.mask == pb.live
+        });
+        walk_packet::<ANY, CONS, L>(self.tree(), &pb, stack, base, &mut tfar, leaf_walk);
+        if !ANY {
+            let t = tfar.to_array();
+            for (l, b) in best.iter().enumerate() {
+                if let Some((s, b)) = b {
+                    out.hit.set(l, Some(self.hit_record(*s, t[l], b, &rays[l])));
+                }
+            }
+        }
+    }
+
+    /// [`trace_packet`](Self::trace_packet) on `stack` above its entries, the box test and
+    /// level chosen by the caller: an instance's object walk. Lanes whose object-space rays are
+    /// not valid miss.
     pub(crate) fn trace_packet_on<const ANY: bool, const CONS: bool, L: Level>(
         &self,
         p: &RayPacket,
         hit: &mut HitPacket,
         stack: &mut Stack,
     ) -> u32 {
-        *hit = HitPacket::default();
-        let mut mask = 0;
-        let mut bits = p.active & crate::simd::low_bits(PACKET_WIDTH);
-        while bits != 0 {
-            let l = bits.trailing_zeros() as usize;
-            bits &= bits - 1;
-            let ray = p.get(l);
-            if !ray.is_valid() {
-                continue;
-            }
-            if let Some(h) = self.trace1_on::<ANY, CONS, L>(&ray.clamped_to_zero(), stack) {
-                mask |= 1 << l;
-                hit.set(l, Some(h));
-            }
+        let mut out = PacketHits::new(hit);
+        if !self.is_empty() {
+            self.trace_packet_with::<ANY, CONS, L>(p, &mut out, stack);
         }
-        mask
+        out.mask
     }
 
     /// The closest hits of a packet nearer than those already in `hits`, written over them;
@@ -244,17 +326,17 @@ impl SolidBvh {
         if self.is_empty() {
             return 0;
         }
-        let mut mask = 0;
-        let mut bits = p.active & crate::simd::low_bits(PACKET_WIDTH);
+        let mut q = *p;
+        for l in 0..PACKET_WIDTH {
+            q.tfar[l] = q.tfar[l].min(hits.t[l]);
+        }
+        let mut mine = HitPacket::default();
+        let mask = self.trace_packet::<false>(&q, &mut mine);
+        let mut bits = mask;
         while bits != 0 {
             let l = bits.trailing_zeros() as usize;
             bits &= bits - 1;
-            let mut r = p.get(l);
-            r.tfar = r.tfar.min(hits.t[l]);
-            if let Some(h) = self.trace1::<false>(&r) {
-                mask |= 1 << l;
-                hits.set(l, Some(h));
-            }
+            hits.set(l, mine.get(l));
         }
         mask
     }
