@@ -304,6 +304,43 @@ fn queries_agree_across_forms() {
     }
 }
 
+/// Camera packets (one origin, 4×4 tiles: the walk's frustum path) and packets with inactive,
+/// NaN, zero-direction and `tnear > tfar` lanes answer as single rays do, for closest and any
+/// hit, in both box tests.
+#[test]
+fn camera_packets_and_bad_lanes_agree_with_single_rays() {
+    for box_test in [strahl::BoxTest::Conservative, strahl::BoxTest::Fast] {
+        let cfg = BuildConfig { box_test, ..BuildConfig::default() };
+        let scene = Scene::build_with_solids(Vec::new(), Vec::new(), gallery_all(), &cfg).unwrap();
+        let camera = strahl::Camera::look_at(Vec3::new(3.0, 5.0, 11.0), Vec3::ZERO, Vec3::Y, 50.0);
+        let (stream, _) = strahl::raygen::primary(&camera, 64, 64);
+        let mut hits = 0;
+        for k in (0..stream.len()).step_by(16) {
+            let mut p = stream.packet(k, 16);
+            let singles: Vec<Ray> = (0..16).map(|l| p.get(l)).collect();
+            // Every fifth packet loses lanes: one inactive, one NaN, one zero direction, one
+            // with tnear > tfar.
+            let spoiled = k / 16 % 5 == 0;
+            if spoiled {
+                p.active &= !(1 << 3);
+                p.dx[5] = f32::NAN;
+                (p.dx[7], p.dy[7], p.dz[7]) = (0.0, 0.0, 0.0);
+                (p.tnear[9], p.tfar[9]) = (2.0, 1.0);
+            }
+            let mut lanes = [None; 16];
+            scene.intersect_packet_each(&p, |l, h| lanes[l] = Some(*h));
+            let occ = scene.occluded_packet(&p);
+            for l in 0..16 {
+                let want = if spoiled && [3, 5, 7, 9].contains(&l) { None } else { scene.intersect(&singles[l]) };
+                hits += want.is_some() as usize;
+                assert_eq!(lanes[l], want, "{box_test:?}, packet {k}, lane {l}");
+                assert_eq!(occ >> l & 1 == 1, want.is_some(), "{box_test:?}, packet {k}, lane {l}");
+            }
+        }
+        assert!(hits > 500 && hits < 3500, "{hits}");
+    }
+}
+
 #[test]
 fn torus_solvers_agree_away_from_tangents() {
     let torus = || vec![placed(Primitive::Torus { major: 1.0, minor: 0.25 }, Vec3::ONE, 0.7, Vec3::ZERO)];
