@@ -315,6 +315,29 @@ impl Scene {
         quality: Quality,
         robust: bool,
     ) -> anyhow::Result<Self> {
+        Self::build_all(device, meshes, spheres, solids, quality, robust, false)
+    }
+
+    /// Builds `solids` alone as the primitives of one `RTC_GEOMETRY_TYPE_USER` geometry (id 0;
+    /// hits report the solid's index as their geometry id, as [`build_mixed`](Self::build_mixed)'s
+    /// one geometry per solid does): the other layout a user of Embree might choose.
+    pub fn build_solid_set(
+        device: &Device,
+        solids: &[strahl::shapes::PreparedSolid],
+        quality: Quality,
+    ) -> anyhow::Result<Self> {
+        Self::build_all(device, &[], &[], solids, quality, false, true)
+    }
+
+    fn build_all(
+        device: &Device,
+        meshes: &[TriangleMesh],
+        spheres: &[strahl::SphereSet],
+        solids: &[strahl::shapes::PreparedSolid],
+        quality: Quality,
+        robust: bool,
+        one_solid_geometry: bool,
+    ) -> anyhow::Result<Self> {
         // SAFETY: `device.raw` is live; every pointer returned by rtcSetNewGeometryBuffer is checked
         // for null and points to a buffer of exactly `item_count × byte_stride` bytes (plus Embree's
         // own padding), which the copies below fill without overrunning.
@@ -361,7 +384,7 @@ impl Scene {
             }
             attach_spheres(device, raw, spheres, meshes.len())?;
             scene.solids = solids.to_vec();
-            attach_solids(device, raw, &scene.solids, meshes.len() + spheres.len())?;
+            attach_solids(device, raw, &scene.solids, meshes.len() + spheres.len(), one_solid_geometry)?;
             let start = Instant::now();
             rtcCommitScene(raw);
             scene.build_ms = start.elapsed().as_secs_f64() * 1e3;
@@ -532,27 +555,37 @@ fn attach_spheres(device: &Device, raw: RTCScene, sets: &[strahl::SphereSet], fi
     Ok(())
 }
 
-/// Attaches each solid as an `RTC_GEOMETRY_TYPE_USER` geometry of one primitive with id
-/// `first_id + index`, its user pointer the solid (which `Scene::solids` keeps alive and in place
-/// for the scene's life).
+/// Attaches the solids as `RTC_GEOMETRY_TYPE_USER` geometry: each as a geometry of one primitive
+/// with id `first_id + index` (`one_geometry` false), or all as the primitives of one geometry
+/// with id `first_id` (`one_geometry` true, the layout of Embree's own user-geometry tutorial).
+/// The user pointer is the first solid of the group, which `Scene::solids` keeps alive and in
+/// place for the scene's life; a callback finds its solid at `primID` from there and reports
+/// `geomID + primID` as the hit's geometry id, so both layouts number hits as strahl does.
 fn attach_solids(
     device: &Device,
     raw: RTCScene,
     solids: &[strahl::shapes::PreparedSolid],
     first_id: usize,
+    one_geometry: bool,
 ) -> anyhow::Result<()> {
+    let groups: Vec<&[strahl::shapes::PreparedSolid]> = if one_geometry {
+        vec![solids].into_iter().filter(|g| !g.is_empty()).collect()
+    } else {
+        solids.chunks(1).collect()
+    };
     // SAFETY: `device.raw` and `raw` are live; each geometry is checked for null; the user
-    // pointer is a `PreparedSolid` owned by the scene being built, never moved or freed before
-    // the scene is released, and only read (shared) by the callbacks.
+    // pointer is the first of `group.len()` consecutive `PreparedSolid`s owned by the scene being
+    // built, never moved or freed before the scene is released, only read (shared) by the
+    // callbacks, which index it by a `primID` below the primitive count set here.
     unsafe {
-        for (k, solid) in solids.iter().enumerate() {
+        for (k, group) in groups.iter().enumerate() {
             let g = rtcNewGeometry(device.raw, RTC_GEOMETRY_TYPE_USER);
             if g.is_null() {
                 device.check("rtcNewGeometry")?;
                 anyhow::bail!("rtcNewGeometry(USER) failed");
             }
-            let ptr = solid as *const strahl::shapes::PreparedSolid as *mut c_void;
-            rtcSetGeometryUserPrimitiveCount(g, 1);
+            let ptr = group.as_ptr() as *mut c_void;
+            rtcSetGeometryUserPrimitiveCount(g, group.len() as c_uint);
             rtcSetGeometryUserData(g, ptr);
             rtcSetGeometryBoundsFunction(g, solid_bounds, std::ptr::null_mut());
             rtcSetGeometryIntersectFunction(g, solid_intersect);
@@ -567,11 +600,12 @@ fn attach_solids(
 
 /// The bounds callback of a solid's user geometry.
 unsafe extern "C" fn solid_bounds(args: *const RTCBoundsFunctionArguments) {
-    // SAFETY: Embree passes valid arguments whose user pointer is the `PreparedSolid` set in
-    // `attach_solids` and whose `bounds_o` points to one writable `RTCBounds`.
+    // SAFETY: Embree passes valid arguments whose user pointer is the first of the
+    // `PreparedSolid`s set in `attach_solids`, `primID` below their count, and whose `bounds_o`
+    // points to one writable `RTCBounds`.
     unsafe {
         let a = &*args;
-        let solid = &*(a.geometryUserPtr as *const strahl::shapes::PreparedSolid);
+        let solid = &*(a.geometryUserPtr as *const strahl::shapes::PreparedSolid).add(a.primID as usize);
         let (lo, hi) = solid.bounds();
         *a.bounds_o = RTCBounds { lower: lo.to_array(), align0: 0.0, upper: hi.to_array(), align1: 0.0 };
     }
@@ -592,11 +626,12 @@ unsafe fn lane_ray(r: *const f32, n: usize, i: usize) -> strahl::Ray {
 /// instance id from the context, as Embree's own user-geometry tutorial does).
 unsafe extern "C" fn solid_intersect(args: *const RTCIntersectFunctionNArguments) {
     // SAFETY: Embree passes valid arguments: `valid` and `rayhit` hold `N` lanes, the user
-    // pointer is the `PreparedSolid` set in `attach_solids`, and `context` is live.
+    // pointer is the first of the `PreparedSolid`s set in `attach_solids` with `primID` below
+    // their count, and `context` is live.
     unsafe {
         let a = &*args;
         let n = a.N as usize;
-        let solid = &*(a.geometryUserPtr as *const strahl::shapes::PreparedSolid);
+        let solid = &*(a.geometryUserPtr as *const strahl::shapes::PreparedSolid).add(a.primID as usize);
         let rh = a.rayhit;
         let hit = rh.add(12 * n);
         let inst = (*a.context).instID[0];
@@ -613,7 +648,7 @@ unsafe extern "C" fn solid_intersect(args: *const RTCIntersectFunctionNArguments
                 *hit.add(4 * n + i) = 0.0;
                 let ids = hit as *mut u32;
                 *ids.add(5 * n + i) = leaf;
-                *ids.add(6 * n + i) = a.geomID;
+                *ids.add(6 * n + i) = a.geomID + a.primID;
                 *ids.add(7 * n + i) = inst;
             }
         }
@@ -626,7 +661,7 @@ unsafe extern "C" fn solid_occluded(args: *const RTCOccludedFunctionNArguments) 
     unsafe {
         let a = &*args;
         let n = a.N as usize;
-        let solid = &*(a.geometryUserPtr as *const strahl::shapes::PreparedSolid);
+        let solid = &*(a.geometryUserPtr as *const strahl::shapes::PreparedSolid).add(a.primID as usize);
         for i in 0..n {
             if *a.valid.add(i) != 0 && solid.intersect(&lane_ray(a.ray, n, i)).is_some() {
                 *a.ray.add(8 * n + i) = f32::NEG_INFINITY;

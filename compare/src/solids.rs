@@ -8,6 +8,9 @@
 //!   ([`strahl::shapes::PreparedSolid`]). Both engines intersect each solid with the same code,
 //!   so the figures isolate what the engines do around it: the BVH over the solids, its
 //!   traversal, and the call per candidate solid (Embree's callback, strahl's inlined walk).
+//!   `EMBREE_SOLIDS=one-geometry` gives Embree the other layout a user might choose, all solids
+//!   as the primitives of one user geometry (`embree::Scene::build_solid_set`); measured both
+//!   ways, the two layouts trace within the run's noise of each other (PERFORMANCE.md).
 //! - **Rays**: primary rays of a camera outside the lattice, shadow rays to a point light and
 //!   diffuse bounces from the primary hits (strahl's stream answers, offset along the normal):
 //!   kernel mode (`kernel.rs`), the three APIs of each engine, interleaved passes.
@@ -78,6 +81,9 @@ pub struct SolidsReport {
     pub threads: usize,
     pub width: usize,
     pub passes: usize,
+    /// Embree's layout of the solids: `per-solid` (one user geometry each) or `one-geometry`.
+    #[serde(default)]
+    pub embree_layout: String,
     pub families: Vec<SolidFamily>,
 }
 
@@ -173,6 +179,13 @@ pub fn run(
     let camera = Camera::look_at(Vec3::new(13.0, 10.0, 16.0), Vec3::splat(4.0), Vec3::Y, 45.0);
     let light = Vec3::new(-6.0, 20.0, 10.0);
     let cfg = BuildConfig::default();
+    // Embree's layout: one user geometry per solid (the default), or all solids as the
+    // primitives of one geometry (`EMBREE_SOLIDS=one-geometry`); PERFORMANCE.md has both.
+    let one_geometry = match std::env::var("EMBREE_SOLIDS").as_deref() {
+        Ok("one-geometry") => true,
+        Ok("per-solid") | Err(_) => false,
+        Ok(other) => anyhow::bail!("EMBREE_SOLIDS={other:?}: expected per-solid or one-geometry"),
+    };
     let mut families_out = Vec::new();
     for (seed, (name, shape)) in all.into_iter().enumerate() {
         if !only.is_empty() && !only.iter().any(|o| o == name) {
@@ -188,7 +201,11 @@ pub fn run(
             let s = pool.install(|| Scene::build_with_solids(vec![], vec![], solids.clone(), &cfg))?;
             strahl_build_ms = strahl_build_ms.min(s.solid_stats().build_ms);
             scene = Some(s);
-            let e = embree::Scene::build_mixed(&device, &[], &[], &prepared, embree::Quality::Medium, false)?;
+            let e = if one_geometry {
+                embree::Scene::build_solid_set(&device, &prepared, embree::Quality::Medium)?
+            } else {
+                embree::Scene::build_mixed(&device, &[], &[], &prepared, embree::Quality::Medium, false)?
+            };
             embree_build_ms = embree_build_ms.min(e.build_ms);
             escene = Some(e);
         }
@@ -217,6 +234,7 @@ pub fn run(
         threads: pool.current_num_threads(),
         width,
         passes,
+        embree_layout: if one_geometry { "one-geometry" } else { "per-solid" }.to_string(),
         families: families_out,
     };
     std::fs::write(out.join("solids.json"), serde_json::to_string_pretty(&report)?)?;
@@ -262,10 +280,11 @@ fn solid_class(
 pub fn markdown(r: &SolidsReport) -> String {
     let mut s = format!(
         "Solids in kernel mode against Embree user geometry running the same intersection code \
-         ({}; {}; commit {}; {} threads; {}² camera rays; median of {} interleaved passes). \
+         ({}; {}; commit {}; {} threads; {}² camera rays; median of {} interleaved passes; Embree's \
+         layout: {}). \
          Mrays/s of each engine's best API; the ratio is Embree's time over strahl's per pass \
          (median [quartiles]; above 1: strahl faster).\n\n",
-        r.date, r.machine, r.commit, r.threads, r.width, r.passes
+        r.date, r.machine, r.commit, r.threads, r.width, r.passes, r.embree_layout
     );
     s.push_str("| family | build ms strahl / Embree | class | rays | hit rate | strahl Mrays/s (API) | Embree Mrays/s (API) | best vs best | hit/miss differ | solid or t differ |\n");
     s.push_str("|---|---:|---|---:|---:|---:|---:|---|---:|---:|\n");
