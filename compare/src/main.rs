@@ -189,7 +189,14 @@ fn main() -> anyhow::Result<()> {
         return Ok(());
     }
     if args.solids {
-        let r = compare::solids::run(args.width as usize, args.passes, &args.families, &pool, &args.out)?;
+        // Embree's layout: one user geometry per solid (the default), or all solids as the
+        // primitives of one geometry; PERFORMANCE.md has both.
+        let one_geometry = match std::env::var("EMBREE_SOLIDS").as_deref() {
+            Ok("one-geometry") => true,
+            Ok("per-solid") | Err(_) => false,
+            Ok(other) => bail!("EMBREE_SOLIDS={other:?}: expected per-solid or one-geometry"),
+        };
+        let r = compare::solids::run(args.width as usize, args.passes, &args.families, one_geometry, &pool, &args.out)?;
         print!("{}", compare::solids::markdown(&r));
         return Ok(());
     }

@@ -8,7 +8,7 @@
 //!   ([`strahl::shapes::PreparedSolid`]). Both engines intersect each solid with the same code,
 //!   so the figures isolate what the engines do around it: the BVH over the solids, its
 //!   traversal, and the call per candidate solid (Embree's callback, strahl's inlined walk).
-//!   `EMBREE_SOLIDS=one-geometry` gives Embree the other layout a user might choose, all solids
+//!   `EMBREE_SOLIDS=one-geometry` (read by `main`) gives Embree the other layout a user might choose, all solids
 //!   as the primitives of one user geometry (`embree::Scene::build_solid_set`); measured both
 //!   ways, the two layouts trace within the run's noise of each other (PERFORMANCE.md).
 //! - **Rays**: primary rays of a camera outside the lattice, shadow rays to a point light and
@@ -160,11 +160,13 @@ fn lattice(shape: &Solid, seed: u64) -> Vec<Solid> {
     out
 }
 
-/// Runs the families named in `only` (all when empty); an unknown name is an error.
+/// Runs the families named in `only` (all when empty; an unknown name is an error), Embree's
+/// solids as the primitives of one user geometry if `one_geometry`, else one geometry each.
 pub fn run(
     width: usize,
     passes: usize,
     only: &[String],
+    one_geometry: bool,
     pool: &rayon::ThreadPool,
     out: &Path,
 ) -> anyhow::Result<SolidsReport> {
@@ -179,13 +181,6 @@ pub fn run(
     let camera = Camera::look_at(Vec3::new(13.0, 10.0, 16.0), Vec3::splat(4.0), Vec3::Y, 45.0);
     let light = Vec3::new(-6.0, 20.0, 10.0);
     let cfg = BuildConfig::default();
-    // Embree's layout: one user geometry per solid (the default), or all solids as the
-    // primitives of one geometry (`EMBREE_SOLIDS=one-geometry`); PERFORMANCE.md has both.
-    let one_geometry = match std::env::var("EMBREE_SOLIDS").as_deref() {
-        Ok("one-geometry") => true,
-        Ok("per-solid") | Err(_) => false,
-        Ok(other) => anyhow::bail!("EMBREE_SOLIDS={other:?}: expected per-solid or one-geometry"),
-    };
     let mut families_out = Vec::new();
     for (seed, (name, shape)) in all.into_iter().enumerate() {
         if !only.is_empty() && !only.iter().any(|o| o == name) {
