@@ -92,14 +92,14 @@ struct Args {
     /// Solid families (issue 30) in kernel mode: 512 placed solids per family (quadrics, torus,
     /// superquadrics, blob, CSG) as strahl solids and as Embree user geometry running the same
     /// intersection code, on the same primary, shadow and diffuse rays, the three APIs each;
-    /// writes solids.md and solids.json to --out, then exits.
+    /// writes solids.md, solids.json and solids.png to --out, then exits.
     #[arg(long)]
     solids: bool,
     /// With --solids: only these families (by the report's names, e.g. `box,torus,CSG die`).
     #[arg(long, value_delimiter = ',')]
     families: Vec<String>,
-    /// Redraw the charts of --spheres, --torus or --implicit into --out from their JSON report
-    /// (spheres.json, torus.json or implicit.json), without measuring.
+    /// Redraw the charts of --spheres, --torus, --implicit or --solids into --out from their JSON
+    /// report (spheres.json, torus.json, implicit.json or solids.json), without measuring.
     #[arg(long, alias = "spheres-charts-from")]
     charts_from: Option<PathBuf>,
     /// Sphereflake levels for --spheres (level 3: 820 spheres, 6: 597,871).
@@ -180,7 +180,11 @@ fn main() -> anyhow::Result<()> {
             Some("spheres.json") => compare::spheres::charts(&args.out, &serde_json::from_slice(&bytes)?),
             Some("torus.json") => compare::torus::chart(&args.out, &serde_json::from_slice(&bytes)?),
             Some("implicit.json") => compare::implicit::chart(&args.out, &serde_json::from_slice(&bytes)?),
-            _ => bail!("--charts-from {}: expected spheres.json, torus.json or implicit.json", json.display()),
+            Some("solids.json") => compare::solids::chart(&args.out, &serde_json::from_slice(&bytes)?),
+            _ => bail!(
+                "--charts-from {}: expected spheres.json, torus.json, implicit.json or solids.json",
+                json.display()
+            ),
         };
     }
     if args.implicit {

@@ -807,22 +807,32 @@ pub fn ensure_font() -> bool {
 
 /// Grouped bars of the best-vs-best ratio per scene and ray class, with the parity line.
 pub fn ratio_chart(path: &Path, r: &Report) -> anyhow::Result<()> {
+    let groups: Vec<(String, [Option<f64>; 3])> = r
+        .scenes
+        .iter()
+        .map(|s| {
+            let of = |cl: &str| s.classes.iter().find(|c| c.class == cl).map(|c| c.best_ratio);
+            (s.name.clone(), [of("primary"), of("shadow"), of("diffuse")])
+        })
+        .collect();
+    class_bars(path, &format!("strahl / Embree throughput, best API vs best API ({} threads)", r.threads), &groups)
+}
+
+/// Grouped bars, one group per name, one bar per ray class (primary, shadow, diffuse; a
+/// missing class leaves a gap), on a ratio axis with the parity line at 1.
+pub(crate) fn class_bars(path: &Path, title: &str, groups: &[(String, [Option<f64>; 3])]) -> anyhow::Result<()> {
     use plotters::prelude::*;
     if !ensure_font() {
         anyhow::bail!("no DejaVu font found for chart labels (apt-get install fonts-dejavu-core)");
     }
-    let names: Vec<&str> = r.scenes.iter().map(|s| s.name.as_str()).collect();
     let classes = ["primary", "shadow", "diffuse"];
     let colors = [RGBColor(66, 133, 244), RGBColor(52, 168, 83), RGBColor(234, 67, 53)];
-    let ymax = r.scenes.iter().flat_map(|s| s.classes.iter().map(|c| c.best_ratio)).fold(1.2f64, f64::max) * 1.3;
+    let ymax = groups.iter().flat_map(|(_, v)| v.iter().flatten().copied()).fold(1.2f64, f64::max) * 1.3;
     let root = BitMapBackend::new(path, (1200, 600)).into_drawing_area();
     root.fill(&WHITE)?;
-    let n = names.len().max(1);
+    let n = groups.len().max(1);
     let mut chart = ChartBuilder::on(&root)
-        .caption(
-            format!("strahl / Embree throughput, best API vs best API ({} threads)", r.threads),
-            ("sans-serif", 24),
-        )
+        .caption(title, ("sans-serif", 24))
         .margin(20)
         .x_label_area_size(60)
         .y_label_area_size(60)
@@ -834,19 +844,15 @@ pub fn ratio_chart(path: &Path, r: &Report) -> anyhow::Result<()> {
         .y_desc("ratio (higher is faster than Embree)")
         .label_style(("sans-serif", 15))
         .draw()?;
-    // Scene names centred under their groups of bars.
-    for (i, name) in names.iter().enumerate() {
+    // Names centred under their groups of bars.
+    for (i, (name, _)) in groups.iter().enumerate() {
         let (px, py) = chart.backend_coord(&(i as f64 + 0.5, 0.0));
         let half = (name.chars().count() as i32 * 7) / 2;
         root.draw(&Text::new(name.to_string(), (px - half, py + 10), ("sans-serif", 14)))?;
     }
     for (k, cl) in classes.iter().enumerate() {
-        let bars: Vec<(f64, f64)> = r
-            .scenes
-            .iter()
-            .enumerate()
-            .filter_map(|(i, s)| s.classes.iter().find(|c| c.class == *cl).map(|c| (i as f64, c.best_ratio)))
-            .collect();
+        let bars: Vec<(f64, f64)> =
+            groups.iter().enumerate().filter_map(|(i, (_, v))| v[k].map(|y| (i as f64, y))).collect();
         let color = colors[k];
         chart
             .draw_series(bars.iter().map(|&(x, y)| {

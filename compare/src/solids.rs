@@ -19,6 +19,7 @@
 //!   differs and, among rays both hit, those whose solid or leaf differs or whose `t` differs
 //!   by more than 1e-6 relative. The accuracy of each family's own routine against float64 is
 //!   the business of `--torus` and `--implicit` (and the tests).
+//! - **Output**: `solids.md`, `solids.json` and `solids.png` (the ratios as grouped bars).
 
 use std::path::Path;
 use std::sync::Arc;
@@ -234,7 +235,28 @@ pub fn run(
     };
     std::fs::write(out.join("solids.json"), serde_json::to_string_pretty(&report)?)?;
     std::fs::write(out.join("solids.md"), markdown(&report))?;
+    chart(out, &report)?;
     Ok(report)
+}
+
+/// `solids.png` from a report: the best-vs-best ratio per family and ray class.
+pub fn chart(out: &Path, report: &SolidsReport) -> anyhow::Result<()> {
+    let groups: Vec<(String, [Option<f64>; 3])> = report
+        .families
+        .iter()
+        .map(|f| {
+            let of = |cl: &str| f.classes.iter().find(|c| c.class == cl).map(|c| c.best_ratio_quartiles[1]);
+            (f.family.clone(), [of("primary"), of("shadow"), of("diffuse")])
+        })
+        .collect();
+    crate::report::class_bars(
+        &out.join("solids.png"),
+        &format!(
+            "Solids: strahl / Embree user geometry (same solid code), best API vs best API ({} threads)",
+            report.threads
+        ),
+        &groups,
+    )
 }
 
 fn solid_class(
