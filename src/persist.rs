@@ -44,7 +44,7 @@ impl Scene {
     /// rebuild). The layout is strahl's own and versioned; it is meant for the same version of
     /// strahl, on machines of the same byte order. A solid with a user's
     /// [`Implicit`](crate::Implicit) surface is written as a marker only (a closure has no
-    /// bytes): reading such bytes is an [`Error::Serialized`](crate::Error::Serialized).
+    /// bytes): reading such bytes is an [`crate::Error::Serialized`].
     pub fn to_bytes(&self) -> Vec<u8> {
         let bvh = self.bvh();
         // Sized from the arrays themselves, never from the statistics (which a loaded scene took

@@ -113,8 +113,8 @@ pub enum Primitive {
     /// A blob (metaballs) in its own space: see [`Blob`].
     Blob(Arc<Blob>),
     /// A user's implicit surface (a Rust closure with a Lipschitz bound), found by sphere
-    /// tracing: see [`Implicit`]. Scene files cannot hold one, and [`Scene::to_bytes`]
-    /// (crate::Scene::to_bytes) writes only a marker that reading refuses.
+    /// tracing: see [`Implicit`]. Scene files cannot hold one, and
+    /// [`Scene::to_bytes`](crate::Scene::to_bytes) writes only a marker that reading refuses.
     Implicit(Arc<Implicit>),
     /// A closed triangle mesh as a solid (inside by crossing parity): see [`MeshSolid`].
     Mesh(Arc<MeshSolid>),

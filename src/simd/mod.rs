@@ -1,12 +1,12 @@
 //! The one place that names SIMD lane types and touches processor state.
 //!
 //! Every other module imports its lane types from here. The triangle and box kernels are written
-//! once against the lane traits ([`SimdF`], [`Four`], [`Packet`], [`BitOrder`]) and are generic
-//! over an instruction-set [`Level`] (see `level.rs`): `wide`'s types as the crate is compiled
+//! once against the lane traits (`SimdF`, `Four`, `Packet`, `BitOrder`) and are generic
+//! over an instruction-set `Level` (see `level.rs`): `wide`'s types as the crate is compiled
 //! (AVX-512 or AVX2 with the repository's `-C target-cpu=native`, SSE2 in a default build), or
 //! `core::arch` vectors for AVX2 and AVX-512 chosen at run time (`x86.rs`), so that a crate
 //! depending on strahl runs the wide kernels without any compiler flags. The sphere tests are
-//! written against [`Lanes`] (short names over [`SimdF`]) and run at every level too.
+//! written against `Lanes` (short names over `SimdF`) and run at every level too.
 #![allow(unsafe_code)]
 
 mod level;
