@@ -1243,6 +1243,30 @@ impl<L: Level> PacketBoxes<L> {
     }
 }
 
+/// The closest hits of packet `p` nearer than those already in `hits` (an earlier walk's over
+/// another tree of the scene), found by `trace(q, out)` on the packet with each lane's `tfar`
+/// lowered to its hit so far, and written over `hits`; returns the lanes `trace` hit. The
+/// sphere and solid trees answer a scene's packets after the triangles with it.
+pub(crate) fn closer_packet_by(
+    p: &RayPacket,
+    hits: &mut HitPacket,
+    trace: impl FnOnce(&RayPacket, &mut HitPacket) -> u32,
+) -> u32 {
+    let mut q = *p;
+    for l in 0..PACKET_WIDTH {
+        q.tfar[l] = q.tfar[l].min(hits.t[l]);
+    }
+    let mut mine = HitPacket::default();
+    let mask = trace(&q, &mut mine);
+    let mut bits = mask;
+    while bits != 0 {
+        let l = bits.trailing_zeros() as usize;
+        bits &= bits - 1;
+        hits.set(l, mine.get(l));
+    }
+    mask
+}
+
 /// Walks the `lanes` of packet `p` one ray at a time: `walk(ray)` with the lane's current `tfar`
 /// returns a hit and its `t`. A hit closes the lane's interval (`ANY`) or lowers its `tfar` to
 /// `t`, and is handed to `record(lane, hit)` (closest hit only). Returns the lanes that hit. The

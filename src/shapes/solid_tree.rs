@@ -13,7 +13,9 @@ use super::primitive::Bound;
 use super::solve::QuarticSolver;
 use crate::bvh::build::{self, Aabb, PrimRef};
 use crate::bvh::node::{EMPTY, Node, leaf_blocks};
-use crate::bvh::traverse::{BoxRay, PacketBoxes, PacketHits, SlabTerms, Stack, Tree, walk_packet, walk1, with_stack};
+use crate::bvh::traverse::{
+    BoxRay, PacketBoxes, PacketHits, SlabTerms, Stack, Tree, closer_packet_by, walk_packet, walk1, with_stack,
+};
 use crate::bvh::{BoxTest, BuildConfig, BuildStats, PlacedTree, place_tree};
 use crate::error::{Error, Result};
 use crate::geometry::triangle::BLOCK;
@@ -326,19 +328,7 @@ impl SolidBvh {
         if self.is_empty() {
             return 0;
         }
-        let mut q = *p;
-        for l in 0..PACKET_WIDTH {
-            q.tfar[l] = q.tfar[l].min(hits.t[l]);
-        }
-        let mut mine = HitPacket::default();
-        let mask = self.trace_packet::<false>(&q, &mut mine);
-        let mut bits = mask;
-        while bits != 0 {
-            let l = bits.trailing_zeros() as usize;
-            bits &= bits - 1;
-            hits.set(l, mine.get(l));
-        }
-        mask
+        closer_packet_by(p, hits, |q, mine| self.trace_packet::<false>(q, mine))
     }
 
     /// Calls `f` for every surface crossing of `ray` in `(tnear, tfar]` with a solid, in no

@@ -12,12 +12,13 @@ use super::sphere::{self, RayLanes, SphereBlock, SphereTest};
 use crate::bvh::build::{self, Aabb, PrimRef};
 use crate::bvh::node::{EMPTY, MAX_BLOCK_INDEX, Node, leaf_blocks};
 use crate::bvh::traverse::{
-    BoxRay, LeafHit, PacketBoxes, PacketHits, SlabTerms, Stack, Tree, each_lane_alone, walk_packet, walk1, with_stack,
+    BoxRay, LeafHit, PacketBoxes, PacketHits, SlabTerms, Stack, Tree, closer_packet_by, each_lane_alone, walk_packet,
+    walk1, with_stack,
 };
 use crate::bvh::{BoxTest, BuildConfig, BuildStats, FAR_MEMORY_BYTES, PlacedTree, on_pool, place_tree};
 use crate::error::{Error, Result};
 use crate::geometry::triangle::BLOCK;
-use crate::ray::{Hit, HitPacket, INVALID_ID, PACKET_WIDTH, Ray, RayPacket};
+use crate::ray::{Hit, HitPacket, INVALID_ID, Ray, RayPacket};
 use crate::simd::*;
 
 /// One sphere test chosen at compile time, so that each walk is compiled for one form.
@@ -464,19 +465,7 @@ impl SphereBvh {
         if self.is_empty() {
             return 0;
         }
-        let mut q = *p;
-        for l in 0..PACKET_WIDTH {
-            q.tfar[l] = q.tfar[l].min(hits.t[l]);
-        }
-        let mut mine = HitPacket::default();
-        let mask = self.trace_packet::<false>(&q, &mut mine);
-        let mut bits = mask;
-        while bits != 0 {
-            let l = bits.trailing_zeros() as usize;
-            bits &= bits - 1;
-            hits.set(l, mine.get(l));
-        }
-        mask
+        closer_packet_by(p, hits, |q, mine| self.trace_packet::<false>(q, mine))
     }
 
     /// Calls `f` for every surface crossing of `ray` in `(tnear, tfar]` with a sphere (both roots
