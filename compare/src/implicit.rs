@@ -41,12 +41,8 @@ pub struct MethodRow {
 
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct ImplicitReport {
-    pub date: String,
-    pub machine: String,
-    pub commit: String,
-    pub threads: usize,
-    pub width: usize,
-    pub passes: usize,
+    #[serde(flatten)]
+    pub run: crate::report::RunInfo,
     pub grazing_rays: usize,
     pub rows: Vec<MethodRow>,
 }
@@ -339,12 +335,7 @@ pub fn run(width: usize, passes: usize, pool: &rayon::ThreadPool, out: &Path) ->
         }
     }
     let report = ImplicitReport {
-        date: crate::report::today(),
-        machine: crate::report::machine(),
-        commit: crate::report::commit(),
-        threads: pool.current_num_threads(),
-        width: w as usize,
-        passes,
+        run: crate::report::RunInfo::now(pool.current_num_threads(), w as usize, passes),
         grazing_rays: grazing_count,
         rows,
     };
@@ -406,11 +397,7 @@ pub fn chart(out: &Path, report: &ImplicitReport) -> anyhow::Result<()> {
 
 /// The report as Markdown.
 pub fn markdown(r: &ImplicitReport) -> String {
-    let mut s = format!(
-        "Implicit shapes ({}; {}; commit {}; {} threads; {}² camera rays, median of {} interleaved passes; \
-         {} grazing rays a shape).\n\n",
-        r.date, r.machine, r.commit, r.threads, r.width, r.passes, r.grazing_rays
-    );
+    let mut s = format!("Implicit shapes ({}; {} grazing rays a shape).\n\n", r.run.line(), r.grazing_rays);
     s.push_str("| shape | method | Mrays/s | wrong (camera) | wrong (grazing) | t error p50 / p99.9 / max |\n");
     s.push_str("|---|---|---:|---:|---:|---|\n");
     for row in &r.rows {

@@ -176,6 +176,7 @@ fn main() -> anyhow::Result<()> {
     let device = embree::Device::new(&format!("threads={}", args.threads))?;
     if let Some(json) = &args.charts_from {
         let bytes = std::fs::read(json).with_context(|| format!("reading {}", json.display()))?;
+        std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
         return match json.file_name().and_then(|n| n.to_str()) {
             Some("spheres.json") => compare::spheres::charts(&args.out, &serde_json::from_slice(&bytes)?),
             Some("torus.json") => compare::torus::chart(&args.out, &serde_json::from_slice(&bytes)?),

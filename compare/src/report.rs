@@ -250,6 +250,34 @@ pub fn build_report(results: &[SceneResult], threads: usize, width: u32, passes:
     }
 }
 
+/// Where and how a run of one of the shape reports (`--torus`, `--implicit`, `--solids`) was
+/// made: flattened into each report's JSON, so the fields stay top-level keys.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+pub struct RunInfo {
+    pub date: String,
+    pub machine: String,
+    pub commit: String,
+    pub threads: usize,
+    /// Camera rays per side.
+    pub width: usize,
+    pub passes: usize,
+}
+
+impl RunInfo {
+    /// This run on `threads` threads.
+    pub fn now(threads: usize, width: usize, passes: usize) -> Self {
+        Self { date: today(), machine: machine(), commit: commit(), threads, width, passes }
+    }
+
+    /// `date; machine; commit C; N threads; W² camera rays, median of P interleaved passes`.
+    pub fn line(&self) -> String {
+        format!(
+            "{}; {}; commit {}; {} threads; {}² camera rays, median of {} interleaved passes",
+            self.date, self.machine, self.commit, self.threads, self.width, self.passes
+        )
+    }
+}
+
 pub(crate) fn today() -> String {
     std::process::Command::new("date")
         .arg("-u")

@@ -76,12 +76,8 @@ pub struct SolidFamily {
 /// The whole run.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct SolidsReport {
-    pub date: String,
-    pub machine: String,
-    pub commit: String,
-    pub threads: usize,
-    pub width: usize,
-    pub passes: usize,
+    #[serde(flatten)]
+    pub run: crate::report::RunInfo,
     /// Embree's layout of the solids: `per-solid` (one user geometry each) or `one-geometry`.
     #[serde(default)]
     pub embree_layout: String,
@@ -224,12 +220,7 @@ pub fn run(
         });
     }
     let report = SolidsReport {
-        date: crate::report::today(),
-        machine: crate::report::machine(),
-        commit: crate::report::commit(),
-        threads: pool.current_num_threads(),
-        width,
-        passes,
+        run: crate::report::RunInfo::now(pool.current_num_threads(), width, passes),
         embree_layout: if one_geometry { "one-geometry" } else { "per-solid" }.to_string(),
         families: families_out,
     };
@@ -253,7 +244,7 @@ pub fn chart(out: &Path, report: &SolidsReport) -> anyhow::Result<()> {
         &out.join("solids.png"),
         &format!(
             "Solids: strahl / Embree user geometry (same solid code), best API vs best API ({} threads)",
-            report.threads
+            report.run.threads
         ),
         &groups,
     )
@@ -297,11 +288,10 @@ fn solid_class(
 pub fn markdown(r: &SolidsReport) -> String {
     let mut s = format!(
         "Solids in kernel mode against Embree user geometry running the same intersection code \
-         ({}; {}; commit {}; {} threads; {}² camera rays; median of {} interleaved passes; Embree's \
-         layout: {}). \
-         Mrays/s of each engine's best API; the ratio is Embree's time over strahl's per pass \
-         (median [quartiles]; above 1: strahl faster).\n\n",
-        r.date, r.machine, r.commit, r.threads, r.width, r.passes, r.embree_layout
+         ({}; Embree's layout: {}). Mrays/s of each engine's best API; the ratio is Embree's \
+         time over strahl's per pass (median [quartiles]; above 1: strahl faster).\n\n",
+        r.run.line(),
+        r.embree_layout
     );
     s.push_str("| family | build ms strahl / Embree | class | rays | hit rate | strahl Mrays/s (API) | Embree Mrays/s (API) | best vs best | hit/miss differ | solid or t differ |\n");
     s.push_str("|---|---:|---|---:|---:|---:|---:|---|---:|---:|\n");

@@ -39,12 +39,8 @@ pub struct SolverRow {
 /// The whole run.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct TorusReport {
-    pub date: String,
-    pub machine: String,
-    pub commit: String,
-    pub threads: usize,
-    pub width: usize,
-    pub passes: usize,
+    #[serde(flatten)]
+    pub run: crate::report::RunInfo,
     /// Rays per set that were ties (near, far, silhouette).
     pub ties: [usize; 3],
     pub silhouette_rays: usize,
@@ -211,12 +207,7 @@ pub fn run(width: usize, passes: usize, pool: &rayon::ThreadPool, out: &Path) ->
         });
     }
     let report = TorusReport {
-        date: crate::report::today(),
-        machine: crate::report::machine(),
-        commit: crate::report::commit(),
-        threads: pool.current_num_threads(),
-        width: w as usize,
-        passes,
+        run: crate::report::RunInfo::now(pool.current_num_threads(), w as usize, passes),
         ties,
         silhouette_rays: sil.len(),
         rows,
@@ -250,9 +241,12 @@ pub fn chart(out: &Path, report: &TorusReport) -> anyhow::Result<()> {
 /// The report as Markdown.
 pub fn markdown(r: &TorusReport) -> String {
     let mut s = format!(
-        "Torus solvers ({}; {}; commit {}; {} threads; {}² camera rays, median of {} interleaved passes; \
-         {} silhouette-aimed rays). Ties apart: near {}, far {}, silhouette {}.\n\n",
-        r.date, r.machine, r.commit, r.threads, r.width, r.passes, r.silhouette_rays, r.ties[0], r.ties[1], r.ties[2]
+        "Torus solvers ({}; {} silhouette-aimed rays). Ties apart: near {}, far {}, silhouette {}.\n\n",
+        r.run.line(),
+        r.silhouette_rays,
+        r.ties[0],
+        r.ties[1],
+        r.ties[2]
     );
     s.push_str("| solver | Mrays/s (near) | t error near p50 / p99.9 / max | far p50 / p99.9 / max | wrong near | wrong far | wrong at silhouettes |\n");
     s.push_str("|---|---:|---|---|---:|---:|---:|\n");
