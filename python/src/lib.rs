@@ -10,14 +10,14 @@ use std::borrow::Cow;
 
 use glam::{Affine3A, Mat3A, Vec3, Vec3A};
 use numpy::ndarray::{Array1, Array2};
-use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray2, PyUntypedArrayMethods};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use rayon::prelude::*;
 use strahl::query::batch;
 use strahl::{
     BuildConfig, Coherence, Hit, HitStream, INVALID_ID, Instance, InstancedScene, Query, Ray, RayStream, Scene,
-    TriangleMesh,
+    SphereSet, TriangleMesh,
 };
 
 /// Rays per parallel job of `cast_rays` and `test_occlusions`: converted, traced and written back
@@ -28,7 +28,10 @@ const CHUNK: usize = strahl::STREAM_CHUNK;
 /// two-level scene. One per Python `Scene` object, so the variants' sizes do not matter.
 #[allow(clippy::large_enum_variant)]
 enum World {
-    Flat(Scene),
+    /// A flat scene, and the user's geometry id of each of its geometries (strahl numbers meshes
+    /// before sphere sets; users number geometries in the order they added them). Empty: the
+    /// same numbers.
+    Flat(Scene, Vec<u32>),
     Instanced {
         scene: InstancedScene,
         /// Per placed instance: the geometry id it shows and the instance id users see
@@ -41,7 +44,7 @@ enum World {
 macro_rules! on_world {
     ($world:expr, $q:ident => $body:expr) => {
         match $world {
-            World::Flat($q) => $body,
+            World::Flat($q, _) => $body,
             World::Instanced { scene: $q, .. } => $body,
         }
     };
@@ -58,7 +61,7 @@ struct Core {
 impl Core {
     fn of(world: World, pool: rayon::ThreadPool) -> Self {
         let bounds = match &world {
-            World::Flat(s) => s.bounds(),
+            World::Flat(s, _) => s.bounds(),
             World::Instanced { scene, .. } => scene.bounds(),
         };
         let size = bounds.map_or(0.0, |(lo, hi)| (hi - lo).length());
@@ -135,10 +138,17 @@ impl World {
     #[inline]
     fn ids(&self, h: &Hit) -> (u32, u32) {
         match self {
-            World::Flat(_) => (h.geom_id, INVALID_ID),
+            World::Flat(_, map) if map.is_empty() => (h.geom_id, INVALID_ID),
+            World::Flat(_, map) => (map.get(h.geom_id as usize).copied().unwrap_or(INVALID_ID), INVALID_ID),
             World::Instanced { ids, .. } => ids.get(h.inst_id as usize).copied().unwrap_or((INVALID_ID, INVALID_ID)),
         }
     }
+}
+
+/// One geometry handed to [`Core::new`], before the build.
+enum Part {
+    Mesh(TriangleMesh),
+    Spheres(SphereSet),
 }
 
 /// The rays of an `(n, 6)` array (origin, direction) over `(tnear, tfar]`.
@@ -289,35 +299,48 @@ impl HitColumns {
 
 #[pymethods]
 impl Core {
-    /// Builds the scene. `geometries`: `(vertices (n, 3) float32, triangles (m, 3) uint32)` pairs,
-    /// geometry ids in list order. `placements`: `(geometry id, 4×4 row-major transform, instance
-    /// id)` triples, or an empty list for a flat scene. `threads`: the pool's size (0: one per
-    /// core). `watertight`: the watertight triangle test with the conservative box test, else
-    /// Möller–Trumbore with the fast box test. `quality`: the build preset, by Embree's names
-    /// (`fast`, `medium`, `high`: spatial splits).
+    /// Builds the scene. `geometries`, geometry ids in list order: `("triangles", vertices (n, 3)
+    /// float32, triangles (m, 3) uint32)` or `("spheres", centres (n, 3) float32, radii (n,)
+    /// float32)`. `placements`: `(geometry id, 4×4 row-major transform, instance id)` triples, or
+    /// an empty list for a flat scene. `threads`: the pool's size (0: one per core). `watertight`:
+    /// the watertight triangle test with the conservative box test, else Möller–Trumbore with the
+    /// fast box test. `quality`: the build preset, by Embree's names (`fast`, `medium`, `high`:
+    /// spatial splits).
     #[new]
     #[pyo3(signature = (geometries, placements, threads, watertight, quality))]
     fn new(
         py: Python<'_>,
-        geometries: Vec<(PyReadonlyArray2<'_, f32>, PyReadonlyArray2<'_, u32>)>,
+        geometries: Vec<(String, PyReadonlyArray2<'_, f32>, Bound<'_, PyAny>)>,
         placements: Vec<(u32, PyReadonlyArray2<'_, f32>, u32)>,
         threads: usize,
         watertight: bool,
         quality: &str,
     ) -> PyResult<Self> {
-        let mut meshes = Vec::with_capacity(geometries.len());
-        for (g, (v, f)) in geometries.iter().enumerate() {
-            let v = rows(v, 3, "vertices")?;
-            if f.shape()[1] != 3 {
-                return Err(value_error(format!("triangles must have shape (m, 3), got {:?}", f.shape())));
-            }
-            let f = f.as_slice().map_err(|_| value_error("triangles must be C-contiguous"))?;
-            meshes.push(TriangleMesh::from_slices(format!("geometry {g}"), v, f).map_err(value_error)?);
+        let mut parts = Vec::with_capacity(geometries.len());
+        for (g, (kind, a, b)) in geometries.iter().enumerate() {
+            parts.push(match kind.as_str() {
+                "triangles" => {
+                    let v = rows(a, 3, "vertices")?;
+                    let f: PyReadonlyArray2<'_, u32> = b.extract()?;
+                    if f.shape()[1] != 3 {
+                        return Err(value_error(format!("triangles must have shape (m, 3), got {:?}", f.shape())));
+                    }
+                    let f = f.as_slice().map_err(|_| value_error("triangles must be C-contiguous"))?;
+                    Part::Mesh(TriangleMesh::from_slices(format!("geometry {g}"), v, f).map_err(value_error)?)
+                }
+                "spheres" => {
+                    let c = points_of(rows(a, 3, "centers")?);
+                    let r: PyReadonlyArray1<'_, f32> = b.extract()?;
+                    let r = r.as_slice().map_err(|_| value_error("radii must be C-contiguous"))?.to_vec();
+                    Part::Spheres(SphereSet::new(format!("geometry {g}"), c, r).map_err(value_error)?)
+                }
+                k => return Err(value_error(format!("geometry {g}: unknown kind {k:?}"))),
+            });
         }
         let mut instances = Vec::with_capacity(placements.len());
         let mut ids = Vec::with_capacity(placements.len());
         for (g, m, id) in &placements {
-            if *g as usize >= meshes.len() {
+            if *g as usize >= parts.len() {
                 return Err(value_error(format!("no geometry {g}")));
             }
             let m = m.as_slice().map_err(|_| value_error("transforms must be C-contiguous"))?;
@@ -333,10 +356,27 @@ impl Core {
         let world = py.detach(|| {
             pool.install(|| -> strahl::Result<World> {
                 if flat {
-                    Ok(World::Flat(Scene::build(meshes, &cfg)?))
+                    // strahl numbers a scene's meshes first, then its sphere sets.
+                    let (mut meshes, mut spheres, mut mesh_ids, mut sphere_ids) = (vec![], vec![], vec![], vec![]);
+                    for (g, p) in parts.into_iter().enumerate() {
+                        match p {
+                            Part::Mesh(m) => (meshes.push(m), mesh_ids.push(g as u32)),
+                            Part::Spheres(s) => (spheres.push(s), sphere_ids.push(g as u32)),
+                        };
+                    }
+                    mesh_ids.extend(sphere_ids);
+                    let in_order = mesh_ids.iter().enumerate().all(|(i, &g)| i as u32 == g);
+                    let map = if in_order { Vec::new() } else { mesh_ids };
+                    Ok(World::Flat(Scene::build_with_spheres(meshes, spheres, &cfg)?, map))
                 } else {
-                    let objects = meshes.into_iter().map(|m| vec![m]).collect();
-                    Ok(World::Instanced { scene: InstancedScene::build(objects, instances, &cfg)?, ids })
+                    let objects = parts
+                        .into_par_iter()
+                        .map(|p| match p {
+                            Part::Mesh(m) => Scene::build(vec![m], &cfg),
+                            Part::Spheres(s) => Scene::build_with_spheres(Vec::new(), vec![s], &cfg),
+                        })
+                        .collect::<strahl::Result<Vec<Scene>>>()?;
+                    Ok(World::Instanced { scene: InstancedScene::from_scenes(objects, instances)?, ids })
                 }
             })
         });
@@ -375,7 +415,9 @@ impl Core {
     /// `strahl::Scene::to_bytes`.
     fn serialize<'py>(&self, py: Python<'py>) -> (bool, Bound<'py, pyo3::types::PyBytes>, Vec<(u32, u32)>) {
         match &self.world {
-            World::Flat(s) => (false, pyo3::types::PyBytes::new(py, &s.to_bytes()), Vec::new()),
+            World::Flat(s, map) => {
+                (false, pyo3::types::PyBytes::new(py, &s.to_bytes()), map.iter().map(|&g| (g, INVALID_ID)).collect())
+            }
             World::Instanced { scene, ids } => (true, pyo3::types::PyBytes::new(py, &scene.to_bytes()), ids.clone()),
         }
     }
@@ -397,15 +439,25 @@ impl Core {
                 Ok(if instanced {
                     World::Instanced { scene: InstancedScene::from_bytes(bytes)?, ids }
                 } else {
-                    World::Flat(Scene::from_bytes(bytes)?)
+                    // A flat scene's ids are the user's geometry id of each of its geometries.
+                    World::Flat(Scene::from_bytes(bytes)?, ids.iter().map(|&(g, _)| g).collect())
                 })
             })
         });
         let world = world.map_err(value_error)?;
-        if let World::Instanced { scene, ids } = &world
-            && scene.instances().len() != ids.len()
-        {
-            return Err(value_error(format!("{} instance ids for {} instances", ids.len(), scene.instances().len())));
+        match &world {
+            World::Instanced { scene, ids } if scene.instances().len() != ids.len() => {
+                return Err(value_error(format!(
+                    "{} instance ids for {} instances",
+                    ids.len(),
+                    scene.instances().len()
+                )));
+            }
+            World::Flat(scene, map) if !map.is_empty() && map.len() != scene.meshes().len() + scene.spheres().len() => {
+                let n = scene.meshes().len() + scene.spheres().len();
+                return Err(value_error(format!("{} geometry ids for {n} geometries", map.len())));
+            }
+            _ => {}
         }
         Ok(Self::of(world, pool))
     }
@@ -420,8 +472,18 @@ impl Core {
     #[getter]
     fn triangles(&self) -> usize {
         match &self.world {
-            World::Flat(s) => s.stats().triangles,
+            World::Flat(s, _) => s.stats().triangles,
             World::Instanced { scene, .. } => scene.stats().unique_triangles,
+        }
+    }
+
+    /// Analytic spheres (an instanced geometry counts once).
+    #[getter]
+    fn spheres(&self) -> usize {
+        let count = |s: &Scene| s.spheres().iter().map(SphereSet::len).sum::<usize>();
+        match &self.world {
+            World::Flat(s, _) => count(s),
+            World::Instanced { scene, .. } => scene.objects().iter().map(count).sum(),
         }
     }
 

@@ -1,6 +1,6 @@
 """Type stubs of the extension module (python/src/lib.rs). Use the wrappers in ``strahl``."""
 
-from typing import List, Tuple
+from typing import List, Tuple, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -14,7 +14,7 @@ HitArrays = Tuple[F32, U32, U32, F32, F32, U32]
 class Core:
     def __init__(
         self,
-        geometries: List[Tuple[F32, U32]],
+        geometries: List[Tuple[str, F32, Union[U32, F32]]],
         placements: List[Tuple[int, F32, int]],
         threads: int,
         watertight: bool,
@@ -24,6 +24,8 @@ class Core:
     def threads(self) -> int: ...
     @property
     def triangles(self) -> int: ...
+    @property
+    def spheres(self) -> int: ...
     def cast_rays(self, rays: F32, tnear: float, tfar: float, width: int) -> HitArrays: ...
     def test_occlusions(self, rays: F32, tnear: float, tfar: float, width: int) -> npt.NDArray[np.bool_]: ...
     def count_intersections(self, rays: F32, tnear: float, tfar: float) -> U32: ...
