@@ -149,6 +149,7 @@ impl World {
 enum Part {
     Mesh(TriangleMesh),
     Spheres(SphereSet),
+    Solid(strahl::Solid),
 }
 
 /// The rays of an `(n, 6)` array (origin, direction) over `(tnear, tfar]`.
@@ -300,8 +301,9 @@ impl HitColumns {
 #[pymethods]
 impl Core {
     /// Builds the scene. `geometries`, geometry ids in list order: `("triangles", vertices (n, 3)
-    /// float32, triangles (m, 3) uint32)` or `("spheres", centres (n, 3) float32, radii (n,)
-    /// float32)`. `placements`: `(geometry id, 4×4 row-major transform, instance id)` triples, or
+    /// float32, triangles (m, 3) uint32)`, `("spheres", centres (n, 3) float32, radii (n,)
+    /// float32)` or `("solid", anything, notation)` with a solid in the scene-file notation
+    /// (`strahl::scene_file::parse_solid`, relative OBJ paths from the working directory). `placements`: `(geometry id, 4×4 row-major transform, instance id)` triples, or
     /// an empty list for a flat scene. `threads`: the pool's size (0: one per core). `watertight`:
     /// the watertight triangle test with the conservative box test, else Möller–Trumbore with the
     /// fast box test. `quality`: the build preset, by Embree's names (`fast`, `medium`, `high`:
@@ -310,7 +312,7 @@ impl Core {
     #[pyo3(signature = (geometries, placements, threads, watertight, quality))]
     fn new(
         py: Python<'_>,
-        geometries: Vec<(String, PyReadonlyArray2<'_, f32>, Bound<'_, PyAny>)>,
+        geometries: Vec<(String, Bound<'_, PyAny>, Bound<'_, PyAny>)>,
         placements: Vec<(u32, PyReadonlyArray2<'_, f32>, u32)>,
         threads: usize,
         watertight: bool,
@@ -320,7 +322,8 @@ impl Core {
         for (g, (kind, a, b)) in geometries.iter().enumerate() {
             parts.push(match kind.as_str() {
                 "triangles" => {
-                    let v = rows(a, 3, "vertices")?;
+                    let a: PyReadonlyArray2<'_, f32> = a.extract()?;
+                    let v = rows(&a, 3, "vertices")?;
                     let f: PyReadonlyArray2<'_, u32> = b.extract()?;
                     if f.shape()[1] != 3 {
                         return Err(value_error(format!("triangles must have shape (m, 3), got {:?}", f.shape())));
@@ -329,10 +332,15 @@ impl Core {
                     Part::Mesh(TriangleMesh::from_slices(format!("geometry {g}"), v, f).map_err(value_error)?)
                 }
                 "spheres" => {
-                    let c = points_of(rows(a, 3, "centers")?);
+                    let a: PyReadonlyArray2<'_, f32> = a.extract()?;
+                    let c = points_of(rows(&a, 3, "centers")?);
                     let r: PyReadonlyArray1<'_, f32> = b.extract()?;
                     let r = r.as_slice().map_err(|_| value_error("radii must be C-contiguous"))?.to_vec();
                     Part::Spheres(SphereSet::new(format!("geometry {g}"), c, r).map_err(value_error)?)
+                }
+                "solid" => {
+                    let text: String = b.extract()?;
+                    Part::Solid(parse_solid(&text).map_err(|e| value_error(format!("geometry {g}: {e}")))?)
                 }
                 k => return Err(value_error(format!("geometry {g}: unknown kind {k:?}"))),
             });
@@ -356,24 +364,37 @@ impl Core {
         let world = py.detach(|| {
             pool.install(|| -> strahl::Result<World> {
                 if flat {
-                    // strahl numbers a scene's meshes first, then its sphere sets.
-                    let (mut meshes, mut spheres, mut mesh_ids, mut sphere_ids) = (vec![], vec![], vec![], vec![]);
+                    // strahl numbers a scene's meshes first, then its sphere sets, then its solids.
+                    let (mut meshes, mut spheres, mut solids) = (vec![], vec![], vec![]);
+                    let mut ids: [Vec<u32>; 3] = Default::default();
                     for (g, p) in parts.into_iter().enumerate() {
+                        let g = g as u32;
                         match p {
-                            Part::Mesh(m) => (meshes.push(m), mesh_ids.push(g as u32)),
-                            Part::Spheres(s) => (spheres.push(s), sphere_ids.push(g as u32)),
-                        };
+                            Part::Mesh(m) => {
+                                meshes.push(m);
+                                ids[0].push(g);
+                            }
+                            Part::Spheres(s) => {
+                                spheres.push(s);
+                                ids[1].push(g);
+                            }
+                            Part::Solid(s) => {
+                                solids.push(s);
+                                ids[2].push(g);
+                            }
+                        }
                     }
-                    mesh_ids.extend(sphere_ids);
-                    let in_order = mesh_ids.iter().enumerate().all(|(i, &g)| i as u32 == g);
-                    let map = if in_order { Vec::new() } else { mesh_ids };
-                    Ok(World::Flat(Scene::build_with_spheres(meshes, spheres, &cfg)?, map))
+                    let map = ids.concat();
+                    let in_order = map.iter().enumerate().all(|(i, &g)| i as u32 == g);
+                    let map = if in_order { Vec::new() } else { map };
+                    Ok(World::Flat(Scene::build_with_solids(meshes, spheres, solids, &cfg)?, map))
                 } else {
                     let objects = parts
                         .into_par_iter()
                         .map(|p| match p {
                             Part::Mesh(m) => Scene::build(vec![m], &cfg),
                             Part::Spheres(s) => Scene::build_with_spheres(Vec::new(), vec![s], &cfg),
+                            Part::Solid(s) => Scene::build_with_solids(Vec::new(), Vec::new(), vec![s], &cfg),
                         })
                         .collect::<strahl::Result<Vec<Scene>>>()?;
                     Ok(World::Instanced { scene: InstancedScene::from_scenes(objects, instances)?, ids })
@@ -453,8 +474,11 @@ impl Core {
                     scene.instances().len()
                 )));
             }
-            World::Flat(scene, map) if !map.is_empty() && map.len() != scene.meshes().len() + scene.spheres().len() => {
-                let n = scene.meshes().len() + scene.spheres().len();
+            World::Flat(scene, map)
+                if !map.is_empty()
+                    && map.len() != scene.meshes().len() + scene.spheres().len() + scene.solids().len() =>
+            {
+                let n = scene.meshes().len() + scene.spheres().len() + scene.solids().len();
                 return Err(value_error(format!("{} geometry ids for {n} geometries", map.len())));
             }
             _ => {}
@@ -717,11 +741,29 @@ fn load_obj<'py>(py: Python<'py>, path: std::path::PathBuf) -> PyResult<Vec<(Arr
         .collect()
 }
 
+/// Checks a solid in the scene-file notation (`strahl::scene_file::parse_solid`, relative OBJ
+/// paths from the working directory): a `ValueError` naming the node if it is malformed or
+/// describes a bad solid.
+#[pyfunction]
+fn check_solid(py: Python<'_>, text: &str) -> PyResult<()> {
+    py.detach(|| parse_solid(text)).map(|_| ()).map_err(value_error)
+}
+
+/// A solid in the scene-file notation, relative OBJ paths from the working directory; the error
+/// says what is wrong without naming a scene file (there is none).
+fn parse_solid(text: &str) -> Result<strahl::Solid, String> {
+    strahl::scene_file::parse_solid(text, std::path::Path::new(".")).map_err(|e| match e {
+        strahl::Error::SceneFile { message, .. } => format!("bad solid: {message}"),
+        e => e.to_string(),
+    })
+}
+
 /// The `strahl._strahl` module.
 #[pymodule]
 fn _strahl(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Core>()?;
     m.add_function(wrap_pyfunction!(load_obj, m)?)?;
+    m.add_function(wrap_pyfunction!(check_solid, m)?)?;
     m.add("INVALID_ID", INVALID_ID)?;
     Ok(())
 }

@@ -1,7 +1,8 @@
 """strahl: high-throughput ray queries on CPUs, from numpy.
 
 An Open3D-shaped :class:`RaycastingScene` (closest hits, occlusion, all hits, hit counts,
-closest points, signed distance, occupancy) over strahl's SIMD BVH, with instancing. Code
+closest points, signed distance, occupancy) over strahl's SIMD BVH, with instancing, over
+triangle meshes, analytic spheres and CSG solids (``add_spheres``, ``add_solid``). Code
 written for ``open3d.t.geometry.RaycastingScene`` ports by changing the import; results are
 numpy arrays instead of Open3D tensors (``ans["t_hit"]`` rather than ``ans["t_hit"].numpy()``).
 
@@ -12,6 +13,9 @@ threads at once. strahl traces in float32: float64 input is converted once, on t
 
 from __future__ import annotations
 
+import json
+import math
+import re
 import threading
 from typing import Any, Dict, List, Optional, Tuple
 
@@ -168,6 +172,38 @@ class RaycastingScene:
             raise ValueError(f"center {i} is {c[i].tolist()}: centers must be finite")
         with self._lock:
             self._geometries.append(("spheres", c.copy(), r.copy()))
+            self._instances.append(None)
+            self._core = None
+            return len(self._geometries) - 1
+
+    def add_solid(self, solid: Any) -> int:
+        """Adds a solid and returns its geometry id: primitives (``sphere``, ``box``,
+        ``cylinder``, ``cone``, ``torus``, ``quadric``, ``superellipsoid``, ``supertoroid``,
+        ``superhyperboloid``, ``ratioquadric``, ``blob``, a closed mesh from an ``obj`` file)
+        placed by ``translate``/``rotate``/``scale``/``matrix`` and combined by ``union``,
+        ``intersection`` and ``difference``, intersected exactly (CSG over ray intervals,
+        float64) in their own BVH beside the triangles'.
+
+        ``solid``: a dict in the notation of a scene file's ``solid = { … }`` (``data/README.md``;
+        nested dicts and lists, numbers, numpy arrays), or that notation as a TOML string::
+
+            die = scene.add_solid({"difference": [
+                {"box": {}},
+                {"sphere": {"center": [0, 0, 1], "radius": 0.3}},
+            ], "rotate": [0, 45, 0]})
+
+        Hits report the primitive hit in ``primitive_ids`` (the tree's leaves, depth first,
+        operands in order) and the outward unit normal; every query sees solids, and instances
+        may place them by any invertible affine map. ``material`` keys are ignored. A malformed
+        or bad solid (a negative radius, ``minor >= major``, NaN, a singular ``scale``, an
+        empty operation, an unbounded plane on its own, a missing OBJ file) raises ``ValueError``
+        naming the node; a value of another type ``TypeError``.
+        """
+        self._check_open()
+        text = solid if isinstance(solid, str) else _toml_value(solid, "solid")
+        _strahl.check_solid(text)
+        with self._lock:
+            self._geometries.append(("solid", None, text))
             self._instances.append(None)
             self._core = None
             return len(self._geometries) - 1
@@ -368,6 +404,33 @@ def load_obj(path: Any, merge: bool = True) -> Any:
     v = np.concatenate([v for v, _ in meshes])
     f = np.concatenate([f + np.uint32(o) for (_, f), o in zip(meshes, offsets)])
     return v, f
+
+
+def _toml_value(x: Any, at: str) -> str:
+    """``x`` (dicts, lists, tuples, numpy arrays, numbers, bools, strings) in TOML's inline
+    notation; ``TypeError`` naming the entry ``at`` for anything else."""
+    if isinstance(x, dict):
+        items = []
+        for k, v in x.items():
+            if not isinstance(k, str):
+                raise TypeError(f"{at}: keys must be strings, got {k!r}")
+            key = k if re.fullmatch(r"[A-Za-z0-9_-]+", k) else json.dumps(k)
+            items.append(f"{key} = {_toml_value(v, f'{at}.{k}')}")
+        return "{ " + ", ".join(items) + " }"
+    if isinstance(x, np.ndarray):
+        x = x.tolist()
+    if isinstance(x, (list, tuple)):
+        return "[" + ", ".join(_toml_value(v, f"{at}[{i}]") for i, v in enumerate(x)) + "]"
+    if isinstance(x, (bool, np.bool_)):
+        return "true" if x else "false"
+    if isinstance(x, (int, np.integer)):
+        return str(int(x))
+    if isinstance(x, (float, np.floating)):
+        f = float(x)
+        return "nan" if f != f else ("inf" if f == math.inf else "-inf" if f == -math.inf else repr(f))
+    if isinstance(x, str):
+        return json.dumps(x)
+    raise TypeError(f"{at}: {type(x).__name__} is not a number, string, list or dict")
 
 
 def _votes(nsamples: Any) -> int:

@@ -1,6 +1,6 @@
 """Type stubs of the extension module (python/src/lib.rs). Use the wrappers in ``strahl``."""
 
-from typing import List, Tuple, Union
+from typing import List, Optional, Tuple, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -14,7 +14,7 @@ HitArrays = Tuple[F32, U32, U32, F32, F32, U32]
 class Core:
     def __init__(
         self,
-        geometries: List[Tuple[str, F32, Union[U32, F32]]],
+        geometries: List[Tuple[str, Optional[F32], Union[U32, F32, str]]],
         placements: List[Tuple[int, F32, int]],
         threads: int,
         watertight: bool,
@@ -42,3 +42,4 @@ class Core:
     def from_scene_file(path: str, threads: int, watertight: bool, quality: str) -> "Core": ...
 
 def load_obj(path: str) -> List[Tuple[F32, U32]]: ...
+def check_solid(text: str) -> None: ...

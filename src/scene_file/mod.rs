@@ -259,6 +259,37 @@ pub struct SceneFile {
     pub render: RenderSpec,
 }
 
+/// A solid from the scene-file notation of one (`data/README.md`): the inline table that follows
+/// `solid =` in a `[mesh.*]` table, for example
+/// `{ difference = [{ box = {} }, { sphere = { radius = 1.3 } }], rotate = [0, 45, 0] }`.
+/// Relative OBJ paths resolve against `base`; `material` keys are accepted and ignored (a scene
+/// without a renderer has no materials). Bad notation or a bad solid is an [`Error::SceneFile`]
+/// whose path is `base` and whose message names the node.
+///
+/// ```
+/// let die = strahl::scene_file::parse_solid(
+///     "{ difference = [{ box = {} }, { sphere = { center = [0, 0, 1], radius = 0.3 } }] }",
+///     std::path::Path::new("."),
+/// )?;
+/// assert!(die.contains(glam::Vec3::new(0.0, 0.0, -0.5)) && !die.contains(glam::Vec3::new(0.0, 0.0, 0.9)));
+/// # Ok::<(), strahl::Error>(())
+/// ```
+pub fn parse_solid(text: &str, base: &Path) -> Result<crate::Solid> {
+    #[derive(Deserialize)]
+    #[serde(deny_unknown_fields)]
+    struct One {
+        solid: solid::RawSolid,
+    }
+    let err = |message: String| Error::SceneFile { path: base.to_path_buf(), message };
+    if text.len() as u64 > MAX_SCENE_FILE_BYTES {
+        return Err(err(format!("a solid of {} bytes; at most {MAX_SCENE_FILE_BYTES}", text.len())));
+    }
+    let one: One = toml::from_str(&format!("solid = {text}")).map_err(|e| err(e.to_string()))?;
+    let (solid, _) = solid::build(&one.solid, base).map_err(err)?;
+    solid.check().map_err(|e| err(format!("the solid: {e}")))?;
+    Ok(solid)
+}
+
 impl SceneFile {
     /// Reads and checks a scene file; meshes are not loaded yet.
     pub fn read(path: impl AsRef<Path>) -> Result<Self> {

@@ -1,4 +1,5 @@
-"""Analytic spheres in strahl.RaycastingScene (add_spheres) against float64 numpy references."""
+"""Analytic spheres and CSG solids in strahl.RaycastingScene (add_spheres, add_solid) against
+float64 numpy references and point membership."""
 
 import pickle
 
@@ -191,3 +192,114 @@ def test_pickle_keeps_spheres_and_ids():
     with pytest.raises(ValueError, match="geometry ids"):
         strahl._strahl.Core.deserialize(False, data, ids + [(2, INVALID)], 1)
     assert strahl._strahl.Core.deserialize(False, data, ids, 1).spheres == len(c)
+
+
+# -- solids (add_solid) -------------------------------------------------------------------------
+
+DIE = {"difference": [{"box": {}}, {"sphere": {"center": [0, 0, 1], "radius": 0.5}}]}
+
+
+def die_crossings(rays):
+    """Every boundary crossing (t > 0) of each ray with the box [-1, 1]³ minus the ball of radius
+    0.5 at (0, 0, 1), in float64, by intervals: the box's slab interval minus the ball's."""
+    o, d = rays[:, :3].astype(np.float64), rays[:, 3:].astype(np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a, b = (-1 - o) / d, (1 - o) / d
+    t0 = np.nanmax(np.minimum(a, b), axis=1)
+    t1 = np.nanmin(np.maximum(a, b), axis=1)
+    s0, s1 = sphere_roots(np.array([[0.0, 0.0, 1.0]]), np.array([0.5]), rays)
+    s0, s1 = s0[:, 0], s1[:, 0]
+    out = []
+    for i in range(len(rays)):
+        if not t0[i] <= t1[i]:
+            out.append([])
+            continue
+        pieces = [(t0[i], t1[i])]
+        if np.isfinite(s0[i]):
+            pieces = [(x, y) for x, y in ((t0[i], min(t1[i], s0[i])), (max(t0[i], s1[i]), t1[i])) if x < y]
+        out.append(sorted(t for p in pieces for t in p if t > 0))
+    return out
+
+
+def test_solid_matches_intervals_and_membership():
+    s = strahl.RaycastingScene()
+    assert s.add_solid(DIE) == 0
+    rays = random_rays(20, 3000) * np.float32([1.5, 1.5, 1.5, 1, 1, 1])
+    want = die_crossings(rays)
+    first = np.array([w[0] if w else np.inf for w in want])
+    got = s.cast_rays(rays)
+    hit = np.isfinite(first)
+    assert hit.sum() > 500
+    np.testing.assert_array_equal(np.isfinite(got["t_hit"]), hit)
+    np.testing.assert_allclose(got["t_hit"][hit], first[hit], rtol=1e-4, atol=1e-6)
+    # Leaves depth first: the box is primitive 0, the ball 1.
+    p = rays[hit, :3] + rays[hit, 3:] * first[hit, None]
+    on_ball = np.abs(np.linalg.norm(p - [0, 0, 1], axis=1) - 0.5) < 1e-4
+    np.testing.assert_array_equal(got["primitive_ids"][hit], on_ball.astype(np.uint32))
+    normal = np.where(on_ball[:, None], -(p - [0, 0, 1]) / 0.5, 0)
+    np.testing.assert_allclose(got["primitive_normals"][hit][on_ball], normal[on_ball], atol=2e-3)
+    np.testing.assert_array_equal(s.count_intersections(rays), [len(w) for w in want])
+    pts = np.random.default_rng(21).uniform(-1.5, 1.5, (4000, 3))
+    inside = (np.abs(pts) <= 1).all(axis=1) & (np.linalg.norm(pts - [0, 0, 1], axis=1) > 0.5)
+    np.testing.assert_array_equal(s.compute_occupancy(pts), inside)
+
+
+def test_solid_notation_string_placement_and_mixed_ids():
+    v, f = soup(22, n=40)
+    c, r = random_spheres(23, n=10)
+    m = transform([0.7, 1.3, 0.9], 0.6, [0.2, -0.1, 0.3])
+    m[0, 1] = 0.4  # a shear: solids take any invertible affine map
+    s = strahl.RaycastingScene()
+    assert s.add_triangles(v, f) == 0
+    placed = dict(DIE, matrix=m[:3].tolist())
+    assert s.add_solid(placed) == 1
+    assert s.add_spheres(c, r) == 2
+    # The same solid as a TOML string, placed as an instance instead.
+    t = strahl.RaycastingScene()
+    g = t.add_solid("{ difference = [{ box = {} }, { sphere = { center = [0, 0, 1], radius = 0.5 } }] }")
+    t.add_instances(g, m)
+    rays = random_rays(24, 3000)
+    a, b = s.cast_rays(rays), t.cast_rays(rays)
+    solid_hits = a["geometry_ids"] == 1
+    assert solid_hits.sum() > 100
+    assert (a["geometry_ids"] == 0).sum() > 100 and (a["geometry_ids"] == 2).sum() > 20
+    # Where the mixed scene hits the solid first, the instanced solid alone hits there too.
+    np.testing.assert_allclose(a["t_hit"][solid_hits], b["t_hit"][solid_hits], rtol=1e-4, atol=1e-6)
+    np.testing.assert_array_equal(a["primitive_ids"][solid_hits], b["primitive_ids"][solid_hits])
+    np.testing.assert_allclose(a["primitive_normals"][solid_hits], b["primitive_normals"][solid_hits], atol=2e-3)
+    assert np.all(b["geometry_ids"][np.isfinite(b["t_hit"])] == g)
+    after = pickle.loads(pickle.dumps(s)).cast_rays(rays)
+    for k in a:
+        np.testing.assert_array_equal(a[k], after[k])
+    unbuilt = strahl.RaycastingScene()
+    unbuilt.add_solid(DIE)
+    restored = pickle.loads(pickle.dumps(unbuilt))
+    assert restored._core is None
+    np.testing.assert_array_equal(restored.cast_rays(rays)["t_hit"], unbuilt.cast_rays(rays)["t_hit"])
+
+
+def test_bad_solids_raise_clear_errors():
+    s = strahl.RaycastingScene()
+    for bad, match in [
+        ({"torus": {"major": 1.0, "minor": 2.0}}, "minor"),
+        ({"box": {}, "sphere": {}}, "exactly one"),
+        ({"union": []}, "no operands"),
+        ({"sphere": {"radius": float("nan")}}, "radius"),
+        ({"sphere": {"radius": -1}}, "radius"),
+        ({"box": {}, "scale": [1, 0, 1]}, "invertible"),
+        ({"plane": {"normal": [0, 1, 0]}}, "unbounded"),
+        ({"obj": "/nonexistent/die.obj"}, "die.obj"),
+        ({"sphere": {"radius": 1}, "colour": 3}, "colour"),
+        ("{ box = ", "unclosed"),
+        ("{ box = {} }\n[mesh.x]\nobj = 'a.obj'", "mesh"),
+    ]:
+        with pytest.raises(ValueError, match=match):
+            s.add_solid(bad)
+    with pytest.raises(TypeError, match=r"solid\.sphere\.radius"):
+        s.add_solid({"sphere": {"radius": object()}})
+    with pytest.raises(TypeError, match="keys"):
+        s.add_solid({1: {}})
+    # Keys that need quoting reach the parser as keys (and are refused there by name).
+    with pytest.raises(ValueError, match="a b"):
+        s.add_solid({"a b": {}})
+    assert s.add_solid({"sphere": {"radius": np.float32(0.5), "center": np.zeros(3)}}) == 0
