@@ -59,6 +59,24 @@ struct Core {
 }
 
 impl Core {
+    /// A `NotImplementedError` for point queries on scenes with solids: strahl's closest-point
+    /// search covers triangles and spheres only, and would answer as if the solids were not
+    /// there.
+    fn no_solids(&self, query: &str) -> PyResult<()> {
+        let has = |s: &Scene| !s.solids().is_empty();
+        let any = match &self.world {
+            World::Flat(s, _) => has(s),
+            World::Instanced { scene, .. } => scene.objects().iter().any(has),
+        };
+        if any {
+            return Err(pyo3::exceptions::PyNotImplementedError::new_err(format!(
+                "{query}: the scene has solids, and closest points are found on triangles and spheres only \
+                 (ray queries and compute_occupancy cover solids)"
+            )));
+        }
+        Ok(())
+    }
+
     fn of(world: World, pool: rayon::ThreadPool) -> Self {
         let bounds = match &world {
             World::Flat(s, _) => s.bounds(),
@@ -667,6 +685,7 @@ impl Core {
         py: Python<'py>,
         points: PyReadonlyArray2<'py, f32>,
     ) -> PyResult<(Arr2<'py, f32>, HitArrays<'py>)> {
+        self.no_solids("compute_closest_points")?;
         let p = points_of(rows(&points, 3, "query points")?);
         let found = py.detach(|| self.pool.install(|| on_world!(&self.world, q => batch::closest_points(q, &p))));
         let n = p.len();
@@ -703,6 +722,7 @@ impl Core {
         points: PyReadonlyArray2<'py, f32>,
         votes: usize,
     ) -> PyResult<Arr1<'py, f32>> {
+        self.no_solids("compute_signed_distance")?;
         let p = points_of(rows(&points, 3, "query points")?);
         let d = py.detach(|| self.pool.install(|| on_world!(&self.world, q => batch::signed_distances(q, &p, votes))));
         Ok(Array1::from(d).into_pyarray(py))

@@ -193,8 +193,11 @@ class RaycastingScene:
             ], "rotate": [0, 45, 0]})
 
         Hits report the primitive hit in ``primitive_ids`` (the tree's leaves, depth first,
-        operands in order) and the outward unit normal; every query sees solids, and instances
-        may place them by any invertible affine map. ``material`` keys are ignored. A malformed
+        operands in order) and the outward unit normal; the ray queries and
+        :meth:`compute_occupancy` see solids, and instances may place them by any invertible
+        affine map. Closest points are not found on solids: :meth:`compute_closest_points`,
+        :meth:`compute_distance` and :meth:`compute_signed_distance` raise
+        ``NotImplementedError`` on a scene that has any. ``material`` keys are ignored. A malformed
         or bad solid (a negative radius, ``minor >= major``, NaN, a singular ``scale``, an
         empty operation, an unbounded plane on its own, a missing OBJ file) raises ``ValueError``
         naming the node; a value of another type ``TypeError``.
@@ -317,7 +320,8 @@ class RaycastingScene:
         """The surface point nearest to each query point (``(..., 3)``): ``points``,
         ``geometry_ids``, ``primitive_ids``, ``primitive_uvs``, ``primitive_normals`` (unit),
         ``instance_ids``, and ``distance``. Points that are not finite, and every point of an
-        empty scene, get NaN points and ``INVALID_ID``."""
+        empty scene, get NaN points and ``INVALID_ID``. Triangles and spheres only: a scene with
+        solids (:meth:`add_solid`, scene files) raises ``NotImplementedError``."""
         q, lead = _float_rows(query_points, 3, "query_points")
         pts, (d, g, p, uv, n, i) = self._built().compute_closest_points(q)
         return {

@@ -242,6 +242,10 @@ def test_solid_matches_intervals_and_membership():
     pts = np.random.default_rng(21).uniform(-1.5, 1.5, (4000, 3))
     inside = (np.abs(pts) <= 1).all(axis=1) & (np.linalg.norm(pts - [0, 0, 1], axis=1) > 0.5)
     np.testing.assert_array_equal(s.compute_occupancy(pts), inside)
+    # Closest points are not searched on solids: a clear error, not an "infinitely far" answer.
+    for query in (s.compute_closest_points, s.compute_distance, s.compute_signed_distance):
+        with pytest.raises(NotImplementedError, match="solids"):
+            query(pts[:3])
 
 
 def test_solid_notation_string_placement_and_mixed_ids():
