@@ -369,7 +369,7 @@ pub fn markdown(r: &TorusReport) -> String {
         ));
     }
     if let Some(first) = r.stress.first() {
-        s.push_str("\nStress sets: rays built to break a solver. Per solver: wrong hit/miss share, t error p99.9 / max (ties apart).\n\n| r / R | rays | count | ties |");
+        s.push_str("\nStress sets: rays built to break a solver. Per solver: wrong hit/miss share, t error p99.9 / max (ties apart).\n\n| r / R | set | rays | ties |");
         for (name, ..) in &first.solvers {
             s.push_str(&format!(" {name} |"));
         }
