@@ -6,7 +6,7 @@
 //! `|(√(x² + z²) − R, y)| − r` in float64 (1-Lipschitz, so no crossing is stepped over), then
 //! marching inside to the exit; rays that pass within 1e-8 r of the surface or cross a chord
 //! shorter than 3e-4 r (a penetration of about 1e-8 r) are ties, counted apart. Stress sets
-//! ([`stress`]) try to break the solvers: thin tubes, rays tangent to the inner and outer
+//! (`stress`) try to break the solvers: thin tubes, rays tangent to the inner and outer
 //! equator (near-double roots), a camera 10⁵ times farther.
 
 use std::path::Path;
