@@ -9,8 +9,8 @@
 use std::borrow::Cow;
 
 use glam::{Affine3A, Mat3A, Vec3, Vec3A};
-use numpy::ndarray::{Array1, Array2};
-use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
+use numpy::ndarray::{Array1, Array2, Array3};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use rayon::prelude::*;
@@ -778,12 +778,83 @@ fn parse_solid(text: &str) -> Result<strahl::Solid, String> {
     })
 }
 
+/// Renders a scene file with strahl's renderer (the seeds' recursive ray tracer, `strahl
+/// render`): its camera, lights and materials, the file's `[render]` settings overridden by the
+/// arguments given. Returns the linear RGB image `(height, width, 3)` float32 (rows from the top),
+/// its 8-bit sRGB form as `strahl render` writes PNGs, and the statistics. A file that cannot be
+/// read is an `OSError`; a malformed one, one without a `[camera]`, or settings out of range a
+/// `ValueError`.
+#[pyfunction]
+#[pyo3(signature = (path, width, height, spp, max_depth, bailout, threads))]
+#[allow(clippy::too_many_arguments, clippy::type_complexity)]
+fn render<'py>(
+    py: Python<'py>,
+    path: std::path::PathBuf,
+    width: Option<u32>,
+    height: Option<u32>,
+    spp: Option<u32>,
+    max_depth: Option<u32>,
+    bailout: Option<f32>,
+    threads: usize,
+) -> PyResult<(Bound<'py, PyArray3<f32>>, Bound<'py, PyArray3<u8>>, Bound<'py, pyo3::types::PyDict>)> {
+    let pool = make_pool(threads)?;
+    let file = py.detach(|| strahl::SceneFile::read(&path)).map_err(|e| file_error(e, &path))?;
+    let camera = file
+        .camera
+        .as_ref()
+        .and_then(|c| c.render_camera())
+        .ok_or_else(|| value_error(format!("{}: the scene file has no [camera]", path.display())))?;
+    let mut settings = file.render.settings;
+    settings.width = width.unwrap_or(settings.width);
+    settings.height = height.unwrap_or(settings.height);
+    settings.spp = spp.unwrap_or(settings.spp);
+    settings.max_depth = max_depth.unwrap_or(settings.max_depth);
+    settings.bailout = bailout.unwrap_or(settings.bailout);
+    settings.check().map_err(value_error)?;
+    let started = std::time::Instant::now();
+    let rendered = py.detach(|| {
+        pool.install(|| -> strahl::Result<_> {
+            let objects = file.load_objects()?;
+            let world = file.world(&objects)?;
+            let scene = file.build_from(objects, &BuildConfig::default())?;
+            let build_seconds = started.elapsed().as_secs_f64();
+            let renderer = strahl::render::Renderer { query: &scene, world: &world, camera, settings };
+            let (image, stats) = renderer.render(&|_| {})?;
+            Ok((image, stats, build_seconds))
+        })
+    });
+    let (image, stats, build_seconds) = rendered.map_err(|e| file_error(e, &path))?;
+    let (h, w) = (image.height as usize, image.width as usize);
+    let linear: Vec<f32> = image.pixels.iter().flat_map(|p| p.to_array()).collect();
+    let linear = Array3::from_shape_vec((h, w, 3), linear).map_err(value_error)?.into_pyarray(py);
+    let srgb = Array3::from_shape_vec((h, w, 3), image.to_srgb8()).map_err(value_error)?.into_pyarray(py);
+    let d = pyo3::types::PyDict::new(py);
+    let kinds = ["primary", "shadow", "reflected", "refracted"];
+    let rays = pyo3::types::PyDict::new(py);
+    for (k, n) in kinds.iter().zip(stats.rays) {
+        rays.set_item(k, n)?;
+    }
+    d.set_item("rays", rays)?;
+    d.set_item("seconds", stats.seconds)?;
+    d.set_item("build_seconds", build_seconds)?;
+    d.set_item("query_share", stats.query_share())?;
+    d.set_item("threads", stats.threads)?;
+    d.set_item("width", settings.width)?;
+    d.set_item("height", settings.height)?;
+    d.set_item("spp", settings.spp)?;
+    d.set_item("max_depth", settings.max_depth)?;
+    d.set_item("cut_by_weight", stats.counts_cut_by_weight)?;
+    d.set_item("cut_by_depth", stats.counts_cut_by_depth)?;
+    Ok((linear, srgb, d))
+}
+
 /// The `strahl._strahl` module.
 #[pymodule]
 fn _strahl(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Core>()?;
     m.add_function(wrap_pyfunction!(load_obj, m)?)?;
     m.add_function(wrap_pyfunction!(check_solid, m)?)?;
+    m.add_function(wrap_pyfunction!(render, m)?)?;
     m.add("INVALID_ID", INVALID_ID)?;
     Ok(())
 }

@@ -17,13 +17,13 @@ import json
 import math
 import re
 import threading
-from typing import Any, Dict, List, Optional, Tuple
+from typing import Any, Dict, List, NamedTuple, Optional, Tuple
 
 import numpy as np
 
 from . import _strahl
 
-__all__ = ["RaycastingScene", "INVALID_ID", "create_rays_pinhole", "load_obj"]
+__all__ = ["RaycastingScene", "INVALID_ID", "create_rays_pinhole", "load_obj", "render", "Rendered"]
 
 #: The id of "no geometry / primitive / instance" in query results (Embree's and Open3D's).
 INVALID_ID: int = int(_strahl.INVALID_ID)
@@ -391,6 +391,56 @@ class RaycastingScene:
         if "built" in state:
             instanced, data, ids = state["built"]
             self._core = _strahl.Core.deserialize(instanced, data, ids, self._threads)
+
+
+class Rendered(NamedTuple):
+    """What :func:`render` returns."""
+
+    #: Linear RGB radiance, ``(height, width, 3)`` float32, rows from the top.
+    image: np.ndarray
+    #: The same as 8-bit sRGB, ``(height, width, 3)`` uint8: the pixels ``strahl render`` writes
+    #: to a PNG.
+    srgb: np.ndarray
+    #: ``rays`` (per kind: primary, shadow, reflected, refracted), ``seconds`` (the render),
+    #: ``build_seconds`` (loading and BVH), ``query_share`` (of the threads' time), ``threads``,
+    #: ``width``, ``height``, ``spp``, ``max_depth``, ``cut_by_weight``, ``cut_by_depth``.
+    stats: Dict[str, Any]
+
+
+def render(
+    path: Any,
+    width: Optional[int] = None,
+    height: Optional[int] = None,
+    spp: Optional[int] = None,
+    max_depth: Optional[int] = None,
+    bailout: Optional[float] = None,
+    threads: int = 0,
+) -> Rendered:
+    """Renders a strahl scene file (``data/README.md``) with strahl's ray tracer (Whitted
+    recursion with shadows, reflection, refraction, Fresnel and Beer–Lambert; area lights,
+    textures, the cameras of the scene file), as ``strahl render`` does: the same image for any
+    thread count. ``width``, ``height``, ``spp`` (samples per pixel), ``max_depth`` and
+    ``bailout`` override the file's ``[render]`` table; ``threads`` 0 uses one per core.
+
+    A missing or unreadable file raises ``OSError``; a malformed one, one without a
+    ``[camera]``, or a setting out of range (a side of 0 or above 32768 pixels, ``spp`` outside
+    1–4096, ``max_depth`` above 64, ``bailout`` outside [0, 1]) ``ValueError``."""
+    if not isinstance(threads, (int, np.integer)) or isinstance(threads, bool) or threads < 0:
+        raise ValueError(f"threads must be a non-negative integer, got {threads!r}")
+
+    def count(name: str, v: Any) -> Optional[int]:
+        if v is None:
+            return None
+        if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or not 0 <= v < 2**32:
+            raise ValueError(f"{name} must be an integer in [0, 2^32), got {v!r}")
+        return int(v)
+
+    b = None if bailout is None else float(bailout)
+    image, srgb, stats = _strahl.render(
+        str(path), count("width", width), count("height", height), count("spp", spp),
+        count("max_depth", max_depth), b, int(threads)
+    )
+    return Rendered(image, srgb, stats)
 
 
 def load_obj(path: Any, merge: bool = True) -> Any:

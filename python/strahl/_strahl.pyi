@@ -1,6 +1,6 @@
 """Type stubs of the extension module (python/src/lib.rs). Use the wrappers in ``strahl``."""
 
-from typing import List, Optional, Tuple, Union
+from typing import Any, Dict, List, Optional, Tuple, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -43,3 +43,12 @@ class Core:
 
 def load_obj(path: str) -> List[Tuple[F32, U32]]: ...
 def check_solid(text: str) -> None: ...
+def render(
+    path: str,
+    width: Optional[int],
+    height: Optional[int],
+    spp: Optional[int],
+    max_depth: Optional[int],
+    bailout: Optional[float],
+    threads: int,
+) -> Tuple[F32, npt.NDArray[np.uint8], Dict[str, Any]]: ...
