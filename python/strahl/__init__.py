@@ -130,11 +130,7 @@ class RaycastingScene:
             raise ValueError(
                 f"triangle_indices must lie in [0, {len(v)}) for {len(v)} vertices, got [{f.min()}, {f.max()}]"
             )
-        with self._lock:
-            self._geometries.append((v.copy(), np.ascontiguousarray(f, dtype=np.uint32)))
-            self._instances.append(None)
-            self._core = None
-            return len(self._geometries) - 1
+        return self._add_geometry((v.copy(), np.ascontiguousarray(f, dtype=np.uint32)))
 
     def add_spheres(self, centers: Any, radii: Any) -> int:
         """Adds a set of analytic spheres and returns its geometry id (one id for the set, in
@@ -170,11 +166,7 @@ class RaycastingScene:
         if bad.any():
             i = int(np.argmax(bad))
             raise ValueError(f"center {i} is {c[i].tolist()}: centers must be finite")
-        with self._lock:
-            self._geometries.append(("spheres", c.copy(), r.copy()))
-            self._instances.append(None)
-            self._core = None
-            return len(self._geometries) - 1
+        return self._add_geometry(("spheres", c.copy(), r.copy()))
 
     def add_solid(self, solid: Any) -> int:
         """Adds a solid and returns its geometry id: primitives (``sphere``, ``box``,
@@ -205,8 +197,12 @@ class RaycastingScene:
         self._check_open()
         text = solid if isinstance(solid, str) else _toml_value(solid, "solid")
         _strahl.check_solid(text)
+        return self._add_geometry(("solid", None, text))
+
+    def _add_geometry(self, entry: Tuple[Any, ...]) -> int:
+        """Appends a checked geometry entry (see ``_geometries``) and returns its id."""
         with self._lock:
-            self._geometries.append(("solid", None, text))
+            self._geometries.append(entry)
             self._instances.append(None)
             self._core = None
             return len(self._geometries) - 1
