@@ -28,9 +28,9 @@ const CHUNK: usize = strahl::STREAM_CHUNK;
 /// two-level scene. One per Python `Scene` object, so the variants' sizes do not matter.
 #[allow(clippy::large_enum_variant)]
 enum World {
-    /// A flat scene, and the user's geometry id of each of its geometries (strahl numbers meshes
-    /// before sphere sets; users number geometries in the order they added them). Empty: the
-    /// same numbers.
+    /// A flat scene, and the user's geometry id of each of its geometries (strahl numbers meshes,
+    /// then sphere sets, then solids; users number geometries in the order they added them).
+    /// Empty: the same numbers.
     Flat(Scene, Vec<u32>),
     Instanced {
         scene: InstancedScene,
@@ -321,8 +321,9 @@ impl Core {
     /// Builds the scene. `geometries`, geometry ids in list order: `("triangles", vertices (n, 3)
     /// float32, triangles (m, 3) uint32)`, `("spheres", centres (n, 3) float32, radii (n,)
     /// float32)` or `("solid", anything, notation)` with a solid in the scene-file notation
-    /// (`strahl::scene_file::parse_solid`, relative OBJ paths from the working directory). `placements`: `(geometry id, 4×4 row-major transform, instance id)` triples, or
-    /// an empty list for a flat scene. `threads`: the pool's size (0: one per core). `watertight`:
+    /// (`strahl::scene_file::parse_solid`, relative OBJ paths from the working directory).
+    /// `placements`: `(geometry id, 4×4 row-major transform, instance id)` triples, or an empty
+    /// list for a flat scene. `threads`: the pool's size (0: one per core). `watertight`:
     /// the watertight triangle test with the conservative box test, else Möller–Trumbore with the
     /// fast box test. `quality`: the build preset, by Embree's names (`fast`, `medium`, `high`:
     /// spatial splits).
