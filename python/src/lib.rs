@@ -779,6 +779,48 @@ fn parse_solid(text: &str) -> Result<strahl::Solid, String> {
     })
 }
 
+/// A scene file's render set-up: its pool, the file, its camera and its `[render]` settings with
+/// the overrides given (`None` keeps the file's), checked.
+#[allow(clippy::type_complexity)]
+fn render_setup(
+    py: Python<'_>,
+    path: &std::path::Path,
+    overrides: [Option<u32>; 4],
+    bailout: Option<f32>,
+    threads: usize,
+) -> PyResult<(rayon::ThreadPool, strahl::SceneFile, strahl::render::RenderCamera, strahl::render::Settings)> {
+    let pool = make_pool(threads)?;
+    let file = py.detach(|| strahl::SceneFile::read(path)).map_err(|e| file_error(e, path))?;
+    let camera = file
+        .camera
+        .as_ref()
+        .and_then(|c| c.render_camera())
+        .ok_or_else(|| value_error(format!("{}: the scene file has no [camera]", path.display())))?;
+    let mut settings = file.render.settings;
+    let [width, height, spp, max_depth] = overrides;
+    settings.width = width.unwrap_or(settings.width);
+    settings.height = height.unwrap_or(settings.height);
+    settings.spp = spp.unwrap_or(settings.spp);
+    settings.max_depth = max_depth.unwrap_or(settings.max_depth);
+    settings.bailout = bailout.unwrap_or(settings.bailout);
+    settings.check().map_err(value_error)?;
+    Ok((pool, file, camera, settings))
+}
+
+/// Loads a scene file's meshes and builds its scene and shading world, on the current pool;
+/// `f` gets the renderer.
+fn with_renderer<T>(
+    file: &strahl::SceneFile,
+    camera: strahl::render::RenderCamera,
+    settings: strahl::render::Settings,
+    f: impl FnOnce(&strahl::render::Renderer<'_, InstancedScene>) -> strahl::Result<T>,
+) -> strahl::Result<T> {
+    let objects = file.load_objects()?;
+    let world = file.world(&objects)?;
+    let scene = file.build_from(objects, &BuildConfig::default())?;
+    f(&strahl::render::Renderer { query: &scene, world: &world, camera, settings })
+}
+
 /// Renders a scene file with strahl's renderer (the seeds' recursive ray tracer, `strahl
 /// render`): its camera, lights and materials, the file's `[render]` settings overridden by the
 /// arguments given. Returns the linear RGB image `(height, width, 3)` float32 (rows from the top),
@@ -798,30 +840,15 @@ fn render<'py>(
     bailout: Option<f32>,
     threads: usize,
 ) -> PyResult<(Bound<'py, PyArray3<f32>>, Bound<'py, PyArray3<u8>>, Bound<'py, pyo3::types::PyDict>)> {
-    let pool = make_pool(threads)?;
-    let file = py.detach(|| strahl::SceneFile::read(&path)).map_err(|e| file_error(e, &path))?;
-    let camera = file
-        .camera
-        .as_ref()
-        .and_then(|c| c.render_camera())
-        .ok_or_else(|| value_error(format!("{}: the scene file has no [camera]", path.display())))?;
-    let mut settings = file.render.settings;
-    settings.width = width.unwrap_or(settings.width);
-    settings.height = height.unwrap_or(settings.height);
-    settings.spp = spp.unwrap_or(settings.spp);
-    settings.max_depth = max_depth.unwrap_or(settings.max_depth);
-    settings.bailout = bailout.unwrap_or(settings.bailout);
-    settings.check().map_err(value_error)?;
+    let (pool, file, camera, settings) = render_setup(py, &path, [width, height, spp, max_depth], bailout, threads)?;
     let started = std::time::Instant::now();
     let rendered = py.detach(|| {
-        pool.install(|| -> strahl::Result<_> {
-            let objects = file.load_objects()?;
-            let world = file.world(&objects)?;
-            let scene = file.build_from(objects, &BuildConfig::default())?;
-            let build_seconds = started.elapsed().as_secs_f64();
-            let renderer = strahl::render::Renderer { query: &scene, world: &world, camera, settings };
-            let (image, stats) = renderer.render(&|_| {})?;
-            Ok((image, stats, build_seconds))
+        pool.install(|| {
+            with_renderer(&file, camera, settings, |r| {
+                let build_seconds = started.elapsed().as_secs_f64();
+                let (image, stats) = r.render(&|_| {})?;
+                Ok((image, stats, build_seconds))
+            })
         })
     });
     let (image, stats, build_seconds) = rendered.map_err(|e| file_error(e, &path))?;
@@ -849,6 +876,50 @@ fn render<'py>(
     Ok((linear, srgb, d))
 }
 
+/// The ray tree of pixel `(x, y)` of a scene file's image (its first sample, traced depth first
+/// with the renderer's optics: `strahl render --ray-tree`): one dict per ray, parents first
+/// (`parent`, `kind`, `depth`, `origin`, `dir`, `t`, `tfar`, `weight`), and the pixel's colour.
+/// Errors as for [`render`], and a `ValueError` for a pixel outside the image.
+#[pyfunction]
+#[pyo3(signature = (path, x, y, width, height, max_depth, bailout))]
+#[allow(clippy::too_many_arguments, clippy::type_complexity)]
+fn ray_tree<'py>(
+    py: Python<'py>,
+    path: std::path::PathBuf,
+    x: u32,
+    y: u32,
+    width: Option<u32>,
+    height: Option<u32>,
+    max_depth: Option<u32>,
+    bailout: Option<f32>,
+) -> PyResult<(Vec<Bound<'py, pyo3::types::PyDict>>, [f32; 3])> {
+    let (pool, file, camera, settings) = render_setup(py, &path, [width, height, None, max_depth], bailout, 1)?;
+    let traced = py.detach(|| pool.install(|| with_renderer(&file, camera, settings, |r| r.ray_tree(x, y))));
+    let (nodes, colour) = traced.map_err(|e| file_error(e, &path))?;
+    let kind = |k: strahl::render::RayKind| match k {
+        strahl::render::RayKind::Primary => "primary",
+        strahl::render::RayKind::Shadow => "shadow",
+        strahl::render::RayKind::Reflected => "reflected",
+        strahl::render::RayKind::Refracted => "refracted",
+    };
+    let dicts = nodes
+        .iter()
+        .map(|n| {
+            let d = pyo3::types::PyDict::new(py);
+            d.set_item("parent", n.parent)?;
+            d.set_item("kind", kind(n.kind))?;
+            d.set_item("depth", n.depth)?;
+            d.set_item("origin", n.origin)?;
+            d.set_item("dir", n.dir)?;
+            d.set_item("t", n.t)?;
+            d.set_item("tfar", n.tfar)?;
+            d.set_item("weight", n.weight)?;
+            Ok(d)
+        })
+        .collect::<PyResult<Vec<_>>>()?;
+    Ok((dicts, colour.to_array()))
+}
+
 /// The `strahl._strahl` module.
 #[pymodule]
 fn _strahl(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -856,6 +927,7 @@ fn _strahl(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(load_obj, m)?)?;
     m.add_function(wrap_pyfunction!(check_solid, m)?)?;
     m.add_function(wrap_pyfunction!(render, m)?)?;
+    m.add_function(wrap_pyfunction!(ray_tree, m)?)?;
     m.add("INVALID_ID", INVALID_ID)?;
     Ok(())
 }

@@ -23,7 +23,7 @@ import numpy as np
 
 from . import _strahl
 
-__all__ = ["RaycastingScene", "INVALID_ID", "create_rays_pinhole", "load_obj", "render", "Rendered"]
+__all__ = ["RaycastingScene", "INVALID_ID", "create_rays_pinhole", "load_obj", "render", "Rendered", "ray_tree"]
 
 #: The id of "no geometry / primitive / instance" in query results (Embree's and Open3D's).
 INVALID_ID: int = int(_strahl.INVALID_ID)
@@ -424,19 +424,46 @@ def render(
     if not isinstance(threads, (int, np.integer)) or isinstance(threads, bool) or threads < 0:
         raise ValueError(f"threads must be a non-negative integer, got {threads!r}")
 
-    def count(name: str, v: Any) -> Optional[int]:
-        if v is None:
-            return None
-        if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or not 0 <= v < 2**32:
-            raise ValueError(f"{name} must be an integer in [0, 2^32), got {v!r}")
-        return int(v)
-
     b = None if bailout is None else float(bailout)
     image, srgb, stats = _strahl.render(
-        str(path), count("width", width), count("height", height), count("spp", spp),
-        count("max_depth", max_depth), b, int(threads)
+        str(path), _count("width", width), _count("height", height), _count("spp", spp),
+        _count("max_depth", max_depth), b, int(threads)
     )
     return Rendered(image, srgb, stats)
+
+
+def ray_tree(
+    path: Any,
+    x: int,
+    y: int,
+    width: Optional[int] = None,
+    height: Optional[int] = None,
+    max_depth: Optional[int] = None,
+    bailout: Optional[float] = None,
+) -> Tuple[List[Dict[str, Any]], np.ndarray]:
+    """The lecture's ray tree of pixel ``(x, y)`` (column, row from the top) of a scene file's
+    image: its first sample traced depth first with the renderer's optics, as ``strahl render
+    --ray-tree`` writes it. Returns one dict per ray, parents before children (``parent``: the
+    index of the ray that spawned it, ``None`` for the primary ray; ``kind``: ``"primary"``,
+    ``"shadow"``, ``"reflected"`` or ``"refracted"``; ``depth``; ``origin``; ``dir``; ``t``:
+    where it hit or was blocked, ``None`` if it went free; ``tfar``: a shadow feeler's end;
+    ``weight``), and the sample's colour (linear RGB). Errors as for :func:`render`, and
+    ``ValueError`` for a pixel outside the image."""
+    b = None if bailout is None else float(bailout)
+    nodes, colour = _strahl.ray_tree(
+        str(path), _count("x", x), _count("y", y), _count("width", width), _count("height", height),
+        _count("max_depth", max_depth), b
+    )
+    return nodes, np.array(colour, dtype=np.float32)
+
+
+def _count(name: str, v: Any) -> Optional[int]:
+    """``v`` as an unsigned 32-bit count (``None`` stays ``None``); ``ValueError`` otherwise."""
+    if v is None:
+        return None
+    if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or not 0 <= v < 2**32:
+        raise ValueError(f"{name} must be an integer in [0, 2^32), got {v!r}")
+    return int(v)
 
 
 def load_obj(path: Any, merge: bool = True) -> Any:

@@ -52,3 +52,12 @@ def render(
     bailout: Optional[float],
     threads: int,
 ) -> Tuple[F32, npt.NDArray[np.uint8], Dict[str, Any]]: ...
+def ray_tree(
+    path: str,
+    x: Optional[int],
+    y: Optional[int],
+    width: Optional[int],
+    height: Optional[int],
+    max_depth: Optional[int],
+    bailout: Optional[float],
+) -> Tuple[List[Dict[str, Any]], Tuple[float, float, float]]: ...

@@ -91,3 +91,29 @@ def test_bad_render_input(tmp_path):
     bad.write_text(AMBIENT_QUAD.replace('material = "grey"', 'material = "nope"'))
     with pytest.raises(ValueError, match="nope"):
         strahl.render(bad)
+
+
+def test_ray_tree_matches_the_rendered_pixel():
+    scene = DATA / "whitted.toml"
+    img = strahl.render(scene, width=64, height=48).image
+    # A pixel on the glass ball (refracted rays) and one on the floor only.
+    for x, y in [(40, 22), (5, 45)]:
+        nodes, colour = strahl.ray_tree(scene, x, y, width=64, height=48)
+        np.testing.assert_allclose(colour, img[y, x], rtol=1e-5, atol=1e-6)
+        assert nodes[0]["kind"] == "primary" and nodes[0]["parent"] is None and nodes[0]["depth"] == 0
+        for i, n in enumerate(nodes[1:], 1):
+            p = nodes[n["parent"]]
+            assert n["parent"] < i, "parents come first"
+            assert n["depth"] == p["depth"] + (n["kind"] != "shadow")
+            assert p["t"] is not None, "only a ray that hit spawns rays"
+            np.testing.assert_allclose(n["origin"], np.add(p["origin"], np.multiply(p["dir"], p["t"])), atol=1e-3)
+        kinds = {n["kind"] for n in nodes}
+        assert "shadow" in kinds
+        if (x, y) == (40, 22):
+            assert "refracted" in kinds, kinds
+        else:
+            assert kinds <= {"primary", "shadow"} or "reflected" in kinds
+    with pytest.raises(ValueError, match="outside"):
+        strahl.ray_tree(scene, 64, 0, width=64, height=48)
+    with pytest.raises(ValueError, match="x"):
+        strahl.ray_tree(scene, -1, 0)
