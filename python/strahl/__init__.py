@@ -195,7 +195,10 @@ class RaycastingScene:
         naming the node; a value of another type ``TypeError``.
         """
         self._check_open()
-        text = solid if isinstance(solid, str) else _toml_value(solid, "solid")
+        try:
+            text = solid if isinstance(solid, str) else _toml_value(solid, "solid")
+        except RecursionError:
+            raise ValueError("the solid is nested too deeply to write down") from None
         _strahl.check_solid(text)
         return self._add_geometry(("solid", None, text))
 

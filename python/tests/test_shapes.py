@@ -306,4 +306,12 @@ def test_bad_solids_raise_clear_errors():
     # Keys that need quoting reach the parser as keys (and are refused there by name).
     with pytest.raises(ValueError, match="a b"):
         s.add_solid({"a b": {}})
+    # Trees too deep for the notation: a clear error from either side of the parser.
+    deep = {"box": {}}
+    for _ in range(2000):
+        deep = {"union": [deep]}
+    with pytest.raises(ValueError, match="deep"):
+        s.add_solid(deep)
+    with pytest.raises(ValueError, match="TOML"):
+        s.add_solid("{ union = [" * 10000 + "{ box = {} }" + "] }" * 10000)
     assert s.add_solid({"sphere": {"radius": np.float32(0.5), "center": np.zeros(3)}}) == 0
