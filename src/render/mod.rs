@@ -14,6 +14,7 @@
 //! and the contributions of a bounce are summed in ray order.
 
 pub mod camera;
+pub mod feelers;
 pub mod image;
 pub mod light;
 pub mod material;
@@ -390,6 +391,15 @@ impl<Q: Query> Renderer<'_, Q> {
                         rays.push(&ray);
                         info.push((path.pixel, radiance));
                     }
+                    Emission::Shadows(b) => {
+                        let (rays, info) = &mut shadows[b.light as usize];
+                        let n = b.len;
+                        rays.extend_lanes(b.origin, [&b.dir[0][..n], &b.dir[1][..n], &b.dir[2][..n]], 0.0, 1.0);
+                        info.extend(
+                            (0..n)
+                                .map(|l| (path.pixel, Vec3::new(b.radiance[0][l], b.radiance[1][l], b.radiance[2][l]))),
+                        );
+                    }
                     Emission::Child { ray, path, kind } => {
                         next_rays.push(&ray);
                         next_paths.push(path);
@@ -540,7 +550,14 @@ impl<Q: Query> Renderer<'_, Q> {
         });
         let mut emitted = Vec::new();
         let mut counts = ShadeCounts::default();
-        shade::shade(self.world, &self.settings, ray, hit.as_ref(), path, &mut counts, |e| emitted.push(e));
+        shade::shade(self.world, &self.settings, ray, hit.as_ref(), path, &mut counts, |e| match e {
+            Emission::Shadows(b) => {
+                emitted.extend(b.feelers().map(|(ray, radiance)| Emission::Shadow { ray, radiance, light: b.light }))
+            }
+            Emission::Radiance(c) => emitted.push(Emission::Radiance(c)),
+            Emission::Shadow { ray, radiance, light } => emitted.push(Emission::Shadow { ray, radiance, light }),
+            Emission::Child { ray, path, kind } => emitted.push(Emission::Child { ray, path, kind }),
+        });
         stats.add(&counts);
         let mut sum = Vec3::ZERO;
         for e in emitted {
@@ -584,6 +601,7 @@ impl<Q: Query> Renderer<'_, Q> {
                 Emission::Child { ray: r, path: p, kind: k } => {
                     sum += self.trace_depth_first(&r, &p, k, me, stats, tree);
                 }
+                Emission::Shadows(_) => unreachable!("batches are unpacked as they are emitted"),
             }
         }
         sum

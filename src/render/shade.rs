@@ -7,6 +7,8 @@
 
 use glam::Vec3;
 
+use super::feelers::{FeelerBatch, LitPoint, rect_feelers};
+use super::light::{Incident, LightKind};
 use super::material::{FresnelMode, beer_lambert, fresnel_exact, fresnel_schlick, reflect, refract};
 use super::{Settings, World};
 use crate::ray::{Hit, Ray, offset_ray_origin};
@@ -94,7 +96,7 @@ fn mix(a: u64, b: u64) -> u64 {
 
 /// What shading one ray produced.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Emission {
+pub enum Emission<'a> {
     /// Light reaching the pixel directly: ambient, background, already weighted.
     Radiance(Vec3),
     /// A shadow feeler towards light `light`: if it is not occluded, `radiance` reaches the pixel.
@@ -106,6 +108,8 @@ pub enum Emission {
         /// Index of the light.
         light: u32,
     },
+    /// Up to eight shadow feelers of one area light (rectangle lights), in SoA lanes.
+    Shadows(&'a FeelerBatch),
     /// A reflected or refracted ray to trace next.
     Child {
         /// The ray to trace.
@@ -128,6 +132,29 @@ pub struct ShadeCounts {
     pub tir: u64,
 }
 
+/// The shadow feeler of one light sample `inc` (reaching `target`, or `None` for directional
+/// light) from `at`, and the light it brings by the local model (Lambert and Phong); `None` if the
+/// sample is behind the surface or brings nothing.
+#[inline(always)]
+pub fn feeler(at: &LitPoint, inc: &Incident, target: Option<Vec3>) -> Option<(Ray, Vec3)> {
+    let cos = at.ns.dot(inc.dir);
+    if cos <= 0.0 || at.n_face.dot(inc.dir) <= 0.0 {
+        return None;
+    }
+    let r = reflect(-inc.dir, at.ns);
+    let spec = if at.ks == Vec3::ZERO { 0.0 } else { r.dot(-at.d).max(0.0).powf(at.shininess) };
+    let radiance = at.weight * inc.color * (at.kd * cos + at.ks * spec);
+    if radiance.max_element() <= 0.0 {
+        return None;
+    }
+    let ray = match target {
+        // The segment to the light: t in (0, 1) of the unnormalized direction.
+        Some(t) => Ray::segment(at.origin, t - at.origin, 0.0, 1.0),
+        None => Ray::new(at.origin, inc.dir),
+    };
+    Some((ray, radiance))
+}
+
 /// Shades `ray` (carrying `path`) given its closest hit; returns nothing to trace further on a
 /// miss. `emit` receives the emissions in a fixed order (radiance, shadows by light, reflected,
 /// refracted), so every renderer that calls this sums the same terms.
@@ -138,7 +165,7 @@ pub fn shade(
     hit: Option<&Hit>,
     path: &Path,
     counts: &mut ShadeCounts,
-    mut emit: impl FnMut(Emission),
+    mut emit: impl FnMut(Emission<'_>),
 ) {
     let mut weight = path.weight;
     let medium = path.media.top().map(|m| &world.materials[m as usize]);
@@ -174,7 +201,17 @@ pub fn shade(
     }
 
     // Phong: a shadow feeler to every light that faces the surface.
-    let shadow_origin = offset_ray_origin(sp.p, n_face);
+    let at = LitPoint {
+        p: sp.p,
+        origin: offset_ray_origin(sp.p, n_face),
+        ns,
+        n_face,
+        d,
+        weight,
+        kd,
+        ks: mat.specular,
+        shininess: mat.shininess,
+    };
     let lit = mat.diffuse != Vec3::ZERO || mat.texture.is_some() || mat.specular != Vec3::ZERO;
     for (li, light) in world.lights.iter().enumerate() {
         if !lit {
@@ -182,25 +219,31 @@ pub fn shade(
         }
         // Area lights' strata are jittered by a generator seeded with the path and the light,
         // so the image depends neither on the order of shading nor on the backend.
-        let mut rng = Pcg32::new(path.seed, li as u64);
-        light.each_sample(sp.p, &mut rng, |inc, target| {
-            let cos = ns.dot(inc.dir);
-            if cos <= 0.0 || n_face.dot(inc.dir) <= 0.0 {
-                return;
+        let li = li as u32;
+        match light.kind {
+            LightKind::Rect { .. } => {
+                rect_feelers(light, li, &at, &mut Pcg32::new(path.seed, li as u64), |b| emit(Emission::Shadows(b)));
             }
-            let r = reflect(-inc.dir, ns);
-            let spec = if mat.specular == Vec3::ZERO { 0.0 } else { r.dot(-d).max(0.0).powf(mat.shininess) };
-            let radiance = weight * inc.color * (kd * cos + mat.specular * spec);
-            if radiance.max_element() <= 0.0 {
-                return;
+            LightKind::Sphere { .. } => {
+                light.each_sample(sp.p, &mut Pcg32::new(path.seed, li as u64), |inc, target| {
+                    if let Some((ray, radiance)) = feeler(&at, &inc, target) {
+                        emit(Emission::Shadow { ray, radiance, light: li });
+                    }
+                });
             }
-            let ray = match target {
-                // The segment to the light: t in (0, 1) of the unnormalized direction.
-                Some(t) => Ray::segment(shadow_origin, t - shadow_origin, 0.0, 1.0),
-                None => Ray::new(shadow_origin, inc.dir),
-            };
-            emit(Emission::Shadow { ray, radiance, light: li as u32 });
-        });
+            _ => {
+                // One sample (`Light::sample`'s), no jitter: no closure in the way of inlining.
+                let target = match light.kind {
+                    LightKind::Directional { .. } => None,
+                    _ => Some(light.position),
+                };
+                if let Some(inc) = light.incident(sp.p)
+                    && let Some((ray, radiance)) = feeler(&at, &inc, target)
+                {
+                    emit(Emission::Shadow { ray, radiance, light: li });
+                }
+            }
+        }
     }
 
     // Reflection and refraction.
@@ -257,7 +300,7 @@ pub fn shade(
             if dir.dot(n_face) <= 0.0 {
                 dir = reflect(d, n_face);
             }
-            let ray = Ray::new(offset_ray_origin(sp.p, n_face), dir);
+            let ray = Ray::new(at.origin, dir);
             emit(Emission::Child { ray, path: c, kind: RayKind::Reflected });
         }
     }
