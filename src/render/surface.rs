@@ -162,6 +162,7 @@ impl Surfaces {
 
     /// Resolves a hit of `ray`; `None` if the hit's ids name nothing here (a backend built from
     /// other meshes).
+    #[inline(always)]
     pub fn resolve(&self, ray: &Ray, hit: &Hit) -> Option<SurfacePoint> {
         let (object, placement) = if hit.inst_id == INVALID_ID {
             (0, None)
@@ -193,27 +194,28 @@ impl Surfaces {
         if ng == Vec3::ZERO {
             ng = -ray.dir.normalize_or_zero();
         }
-        let mut ns = match &g.normals {
-            Some(n) => n[a] * w + n[b] * hit.u + n[c] * hit.v,
-            None => ng,
-        };
         let mut material = g.material;
         if let Some(pl) = placement {
             p = pl.transform.transform_point3(p);
-            if g.normals.is_some() {
-                ns = pl.normal * ns;
-            }
             material = pl.material.unwrap_or(material);
         }
-        ns = ns.normalize_or_zero();
-        // Vertex normals follow the winding in object space; a mirroring transform flips the
-        // winding's normal but not the inverse transpose's. Keep both on one side.
-        if ns.dot(ng) < 0.0 {
-            ns = -ns;
-        }
-        if ns == Vec3::ZERO || !ns.is_finite() {
-            ns = ng;
-        }
+        // Flat shading: the geometric normal, already of unit length.
+        let ns = match &g.normals {
+            None => ng,
+            Some(n) => {
+                let mut ns = n[a] * w + n[b] * hit.u + n[c] * hit.v;
+                if let Some(pl) = placement {
+                    ns = pl.normal * ns;
+                }
+                ns = ns.normalize_or_zero();
+                // Vertex normals follow the winding in object space; a mirroring transform flips
+                // the winding's normal but not the inverse transpose's. Keep both on one side.
+                if ns.dot(ng) < 0.0 {
+                    ns = -ns;
+                }
+                if ns == Vec3::ZERO || !ns.is_finite() { ng } else { ns }
+            }
+        };
         if !p.is_finite() {
             p = ray.at(hit.t);
         }
