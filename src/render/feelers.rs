@@ -138,7 +138,7 @@ pub fn rect_feelers(
         // Lambert and Phong (`shade::feeler`).
         let cos = ns[0] * dir[0] + ns[1] * dir[1] + ns[2] * dir[2];
         let face = n_face[0] * dir[0] + n_face[1] * dir[1] + n_face[2] * dir[2];
-        ok = ok & cos.simd_gt(f32x8::ZERO) & face.simd_gt(f32x8::ZERO);
+        ok &= cos.simd_gt(f32x8::ZERO) & face.simd_gt(f32x8::ZERO);
         if !ok.any() {
             continue;
         }
@@ -156,7 +156,7 @@ pub fn rect_feelers(
             f32x8::splat(at.weight[c]) * light_c * (f32x8::splat(at.kd[c]) * cos + f32x8::splat(at.ks[c]) * spec)
         });
         let brightest = radiance[0].max(radiance[1]).max(radiance[2]);
-        ok = ok & brightest.simd_gt(f32x8::ZERO);
+        ok &= brightest.simd_gt(f32x8::ZERO);
         let mask = ok.to_bitmask() as u32;
         if mask == 0 {
             continue;
