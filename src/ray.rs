@@ -361,13 +361,13 @@ impl RayStream {
     }
 
     /// Appends rays from the common `origin` along the directions `dir` (by component, equally
-    /// long), each the segment `[tnear, tfar]`.
+    /// long; the shortest counts), each the segment `[tnear, tfar]`.
     pub fn extend_lanes(&mut self, origin: Vec3, dir: [&[f32]; 3], tnear: f32, tfar: f32) {
-        let n = dir[0].len();
+        let n = dir.iter().map(|d| d.len()).min().unwrap_or(0);
         self.ox.extend(std::iter::repeat_n(origin.x, n));
         self.oy.extend(std::iter::repeat_n(origin.y, n));
         self.oz.extend(std::iter::repeat_n(origin.z, n));
-        self.dx.extend_from_slice(dir[0]);
+        self.dx.extend_from_slice(&dir[0][..n]);
         self.dy.extend_from_slice(&dir[1][..n]);
         self.dz.extend_from_slice(&dir[2][..n]);
         self.tnear.extend(std::iter::repeat_n(tnear, n));

@@ -54,6 +54,28 @@ fn wavefront_equals_the_recursion_and_ignores_thread_count() {
     assert_eq!(a, wave);
 }
 
+/// Rectangle lights' feelers leave shading in SIMD batches, which the wavefront appends to its
+/// streams and the recursion unpacks one by one: both must trace the same feelers.
+#[test]
+fn wavefront_equals_the_recursion_under_an_area_light() {
+    let text = whitted().replacen(
+        "[[light]]",
+        "[[light]]\nkind = \"rect\"\nposition = [0.0, 9.0, -2.0]\nu = [3.0, 0.0, 0.0]\nv = [0.0, 0.5, 2.0]\nsamples = [5, 3]\ncolor = 0.8\nfade = 12.0\n\n[[light]]",
+        1,
+    );
+    let (file, scene, world) = load(&text);
+    let mut settings = file.render.settings;
+    (settings.width, settings.height) = (64, 48);
+    let r = renderer(&file, &scene, &world, settings);
+    let (wave, ws) = r.render(&|_| {}).unwrap();
+    let (rec, rs) = r.render_recursive().unwrap();
+    assert_eq!(ws.rays, rs.rays);
+    let hits = ws.rays[RayKind::Primary as usize];
+    assert!(ws.rays[RayKind::Shadow as usize] > 8 * hits, "15 feelers per lit point: {:?}", ws.rays);
+    let worst = wave.pixels.iter().zip(&rec.pixels).map(|(a, b)| (*a - *b).abs().max_element()).fold(0.0, f32::max);
+    assert!(worst < 1e-5, "largest difference {worst}");
+}
+
 /// A white furnace: a non-absorbing glass body in a uniformly white world, no lights, no
 /// ambient. Every Fresnel split and total internal reflection conserves energy, so every pixel
 /// must come out white, up to what the depth limit drops.
