@@ -98,14 +98,26 @@ impl Light {
         self.arriving(p, self.position)
     }
 
+    /// Where the shadow feeler of a one-sample light (point, spot, directional) must reach: the
+    /// light's position, or `None` for directional light (the feeler is unbounded).
+    #[inline(always)]
+    pub(crate) fn fixed_target(&self) -> Option<Vec3> {
+        match self.kind {
+            LightKind::Directional { .. } => None,
+            _ => Some(self.position),
+        }
+    }
+
     /// Sample `s` (of [`samples`](Self::samples)) of the light seen from `p`: what arrives, and
     /// the point the shadow feeler must reach (`None` for directional light). `rng` jitters area
     /// lights' strata.
     #[inline]
     pub fn sample(&self, p: Vec3, s: u32, rng: &mut Pcg32) -> Option<(Incident, Option<Vec3>)> {
         let target = match self.kind {
-            LightKind::Directional { .. } => return self.incident(p).map(|i| (i, None)),
-            LightKind::Point | LightKind::Spot { .. } => self.position,
+            // One sample, the whole light, no jitter.
+            LightKind::Directional { .. } | LightKind::Point | LightKind::Spot { .. } => {
+                return self.incident(p).map(|i| (i, self.fixed_target()));
+            }
             // No strata (a light that `check` rejects): no sample, rather than a division by zero.
             LightKind::Rect { n: [0, _] | [_, 0], .. } | LightKind::Sphere { n: 0, .. } => return None,
             LightKind::Rect { u, v, n } => {

@@ -233,12 +233,8 @@ pub fn shade(
             }
             _ => {
                 // One sample (`Light::sample`'s), no jitter: no closure in the way of inlining.
-                let target = match light.kind {
-                    LightKind::Directional { .. } => None,
-                    _ => Some(light.position),
-                };
                 if let Some(inc) = light.incident(sp.p)
-                    && let Some((ray, radiance)) = feeler(&at, &inc, target)
+                    && let Some((ray, radiance)) = feeler(&at, &inc, light.fixed_target())
                 {
                     emit(Emission::Shadow { ray, radiance, light: li });
                 }
