@@ -13,6 +13,7 @@ use rayon::prelude::*;
 
 use super::node::{EMPTY, MAX_LEAF_BLOCKS, Node, WIDTH, is_leaf, leaf_blocks, leaf_ref};
 use super::traverse::BoxTest;
+use crate::geometry::TriangleMesh;
 use crate::geometry::triangle::{BLOCK, TriangleTest};
 use crate::shapes::{QuarticSolver, SphereTest};
 use crate::simd::{Level, trunc4, with_level};
@@ -435,6 +436,28 @@ fn bin_of(p: &PrimRef, offset: Vec3A, scale: Vec3A, last: Vec3A) -> [i32; 4] {
 #[inline(always)]
 fn bin_index(b: i32) -> usize {
     b as usize & (MAX_BINS - 1)
+}
+
+/// Writes the references of mesh `m`'s hittable triangles in `range` (global ids from `offset`)
+/// to the front of `out` (room for the whole range); returns how many. Each triangle's corners
+/// are fetched once, for the hittability test and the box. Runs at the active level, as
+/// [`bin_into`] does (in a dependency build the crate's level is SSE2; PERFORMANCE.md has what
+/// this gained: little).
+pub(super) fn write_refs(m: &TriangleMesh, offset: usize, range: std::ops::Range<usize>, out: &mut [PrimRef]) -> usize {
+    with_level!(|L| L::call(
+        #[inline(always)]
+        || {
+            let mut n = 0;
+            for i in range {
+                if let Some([a, b, c]) = m.hittable_corners(i) {
+                    let (a, b, c) = (Vec3A::from(a), Vec3A::from(b), Vec3A::from(c));
+                    out[n] = PrimRef::new(Aabb { lo: a.min(b).min(c), hi: a.max(b).max(c) }, (offset + i) as u32);
+                    n += 1;
+                }
+            }
+            n
+        }
+    ))
 }
 
 /// Sets of at least this many references are binned in runs ([`bin_runs`]) when their first

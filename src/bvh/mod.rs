@@ -142,50 +142,42 @@ impl Bvh {
                     .map(move |s| (g, s, (s + PRIM_CHUNK).min(m.triangle_count())))
             })
             .collect();
-        let refs = |&(g, s, e): &(usize, usize, usize)| {
-            let m = &meshes[g];
-            let off = offsets[g];
-            (s..e).filter(|&i| m.is_hittable(i)).map(move |i| {
-                let [a, b, c] = m.triangle(i);
-                let (a, b, c) = (Vec3A::from(a), Vec3A::from(b), Vec3A::from(c));
-                PrimRef::new(Aabb { lo: a.min(b).min(c), hi: a.max(b).max(c) }, (off + i) as u32)
-            })
-        };
+        // One slot per triangle: each item fills its own range (its hittable triangles'
+        // references first), in parallel for large scenes, and the gaps are closed after. A
+        // `flat_map_iter` collect grew a vector per job and then copied them all into one: more
+        // memory churn, after which repeated builds of the forest's objects faulted in 858 fresh
+        // pages per build instead of 29 (PERFORMANCE.md).
         let parallel = total >= cfg.parallel_threshold;
-        let mut prims: Vec<PrimRef> = if parallel {
-            // One slot per triangle: each item fills its own range in parallel (its hittable
-            // triangles' references first), and the gaps are closed after. A `flat_map_iter`
-            // collect grew a vector per job and then copied them all into one: more memory
-            // churn, after which repeated builds of the forest's objects faulted in 858 fresh
-            // pages per build instead of 29 (PERFORMANCE.md).
-            let empty = PrimRef::new(Aabb::EMPTY, 0);
-            let mut slots: Vec<PrimRef> = Vec::with_capacity(total);
+        let empty = PrimRef::new(Aabb::EMPTY, 0);
+        let mut slots: Vec<PrimRef> = Vec::with_capacity(total);
+        if parallel {
             slots.par_extend((0..total).into_par_iter().map(|_| empty));
-            let mut rest = slots.as_mut_slice();
-            let mut jobs = Vec::with_capacity(items.len());
-            for item in &items {
-                let (mine, tail) = std::mem::take(&mut rest).split_at_mut(item.2 - item.1);
-                jobs.push((item, mine));
-                rest = tail;
-            }
-            let counts: Vec<usize> = jobs
-                .into_par_iter()
-                .map(|(item, out)| out.iter_mut().zip(refs(item)).map(|(o, p)| *o = p).count())
-                .collect();
-            let mut end = 0;
-            let mut start = 0;
-            for (item, n) in items.iter().zip(&counts) {
-                if start != end {
-                    slots.copy_within(start..start + n, end);
-                }
-                end += n;
-                start += item.2 - item.1;
-            }
-            slots.truncate(end);
-            slots
         } else {
-            items.iter().flat_map(refs).collect()
+            slots.resize(total, empty);
+        }
+        let mut rest = slots.as_mut_slice();
+        let mut jobs = Vec::with_capacity(items.len());
+        for item in &items {
+            let (mine, tail) = std::mem::take(&mut rest).split_at_mut(item.2 - item.1);
+            jobs.push((item, mine));
+            rest = tail;
+        }
+        let fill = |(&(g, s, e), out): (&(usize, usize, usize), &mut [PrimRef])| {
+            build::write_refs(&meshes[g], offsets[g], s..e, out)
         };
+        let counts: Vec<usize> =
+            if parallel { jobs.into_par_iter().map(fill).collect() } else { jobs.into_iter().map(fill).collect() };
+        let mut end = 0;
+        let mut start = 0;
+        for (item, n) in items.iter().zip(&counts) {
+            if start != end {
+                slots.copy_within(start..start + n, end);
+            }
+            end += n;
+            start += item.2 - item.1;
+        }
+        slots.truncate(end);
+        let mut prims = slots;
         let skipped = total - prims.len();
         if prims.len().div_ceil(BLOCK) > MAX_BLOCK_INDEX {
             return Err(Error::TooManyTriangles(total));

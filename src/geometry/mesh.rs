@@ -82,6 +82,7 @@ impl TriangleMesh {
     }
 
     /// The three corners of triangle `i`.
+    #[inline]
     pub fn triangle(&self, i: usize) -> [Vec3; 3] {
         let [a, b, c] = self.indices[i];
         [self.positions[a as usize], self.positions[b as usize], self.positions[c as usize]]
@@ -90,9 +91,16 @@ impl TriangleMesh {
     /// Whether triangle `i` can ever be hit: finite corners within [`MAX_COORDINATE`] and a
     /// non-zero geometric normal.
     pub fn is_hittable(&self, i: usize) -> bool {
+        self.hittable_corners(i).is_some()
+    }
+
+    /// Triangle `i`'s corners if it [is hittable](Self::is_hittable): one fetch for the test and
+    /// the corners (the builder makes every reference from this).
+    #[inline(always)]
+    pub(crate) fn hittable_corners(&self, i: usize) -> Option<[Vec3; 3]> {
         let [a, b, c] = self.triangle(i);
         let inside = |p: Vec3| p.is_finite() && p.abs().max_element() <= MAX_COORDINATE;
-        inside(a) && inside(b) && inside(c) && (b - a).cross(c - a) != Vec3::ZERO
+        (inside(a) && inside(b) && inside(c) && (b - a).cross(c - a) != Vec3::ZERO).then_some([a, b, c])
     }
 
     /// Applies `f` to every vertex (used to move or scale a mesh in tests and generated scenes).
