@@ -18,7 +18,11 @@
 //!   Fresnel on, `reflection { 0, 1 fresnel on } conserve_energy`; absorption α →
 //!   `fade_power 1001` (exponential), `fade_distance 1/k`, `fade_color 1 − α/k`, k = max α
 //!   (POV-Ray multiplies by `exp(−(1 − fade_color)·d / fade_distance)`);
-//! - checker → `pigment { checker rgb a, rgb b scale s }`;
+//! - checker → `pigment { checker rgb a, rgb b scale s }`; an image texture (OBJ `map_Kd`) on a
+//!   mesh with texture coordinates → `uv_mapping image_map { png "file" gamma srgb interpolate 2 }`
+//!   with `uv_vectors`/`uv_indices` in its `mesh2`, and the mean of `Kd` as the finish's `diffuse`
+//!   (and a factor of `ambient`): POV-Ray cannot multiply an image by a colour;
+//! - materials of OBJ groups and MTL files as the renderer's world resolves them;
 //! - lights: `light_source` (point), `spotlight radius falloff point_at`, `parallel point_at`,
 //!   rect → `area_light u, v, n0, n1 jitter` (POV-Ray's grid spans the edges, strahl's strata
 //!   their cells), sphere → `area_light … circular orient jitter`; `fade` → `fade_distance f
@@ -38,23 +42,63 @@ use std::time::Instant;
 use glam::Vec3;
 use strahl::SceneFile;
 use strahl::TriangleMesh;
-use strahl::render::{FresnelMode, LightKind, Material, Projection, Settings, Texture, surface::vertex_normals};
+use strahl::render::texture::ImageTexture;
+use strahl::render::{FresnelMode, LightKind, Material, Projection, Settings, Texture, World, surface::vertex_normals};
 
 fn v(p: Vec3) -> String {
     format!("<{}, {}, {}>", p.x, p.y, p.z)
 }
 
-fn material_sdl(m: &Material) -> String {
+/// POV-Ray's pigment for an image texture read from a file: `uv_mapping image_map`, bilinear
+/// (`interpolate 2`), repeated (POV-Ray's default, as strahl's), its 8-bit colours read as sRGB
+/// (as strahl decodes them). `None` for a texture made in memory, a format POV-Ray cannot read,
+/// or a path SDL cannot quote.
+fn image_pigment(t: &ImageTexture) -> Option<String> {
+    let path = std::path::absolute(t.source.as_ref()?).ok()?;
+    let kind = match path.extension()?.to_str()?.to_ascii_lowercase().as_str() {
+        "png" => "png",
+        "jpg" | "jpeg" => "jpeg",
+        "tga" => "tga",
+        "gif" => "gif",
+        "tif" | "tiff" => "tiff",
+        "ppm" => "ppm",
+        "bmp" => "bmp",
+        _ => return None,
+    };
+    let text = path.to_str()?;
+    if text.contains(['"', '\\']) {
+        return None;
+    }
+    Some(format!("uv_mapping image_map {{ {kind} \"{text}\" gamma srgb interpolate 2 }}"))
+}
+
+/// `m` as a POV-Ray texture (and interior). `textures` are the world's images; `uv` says
+/// whether the surface has texture coordinates (without them strahl shades an image-textured
+/// material with its diffuse colour, and so does the export).
+fn material_sdl(m: &Material, textures: &[ImageTexture], uv: bool) -> String {
     let mut s = String::from("texture { pigment { ");
+    // An image times the diffuse colour (strahl's `map_Kd` · `Kd`): POV-Ray cannot multiply a
+    // pigment by a colour, so the colour's mean scales the finish's diffuse and ambient terms
+    // instead (exact for a grey `Kd`, the usual one under a `map_Kd`).
+    let image = match m.texture {
+        Some(Texture::Image { index }) if uv && !m.is_transparent() => {
+            textures.get(index as usize).and_then(image_pigment)
+        }
+        _ => None,
+    };
+    let mut k = 1.0;
     if m.is_transparent() {
         write!(s, "rgbf <{}, {}, {}, 1>", m.transmit.x, m.transmit.y, m.transmit.z).unwrap();
+    } else if let Some(img) = image {
+        s.push_str(&img);
+        k = m.diffuse.element_sum() / 3.0;
     } else if let Some(Texture::Checker { other, size }) = m.texture {
         write!(s, "checker rgb {}, rgb {} scale {size}", v(m.diffuse), v(other)).unwrap();
     } else {
         write!(s, "rgb {}", v(m.diffuse)).unwrap();
     }
     s.push_str(" } finish { ");
-    write!(s, "ambient rgb {} diffuse 1 ", v(m.ambient)).unwrap();
+    write!(s, "ambient rgb {} diffuse {k} ", v(m.ambient * k)).unwrap();
     let ks = m.specular.element_sum() / 3.0;
     if ks > 0.0 {
         write!(s, "phong {ks} phong_size {} ", m.shininess).unwrap();
@@ -89,7 +133,9 @@ fn solid_sdl(solid: &strahl::Solid, textures: &mut std::slice::Iter<'_, String>,
                 Primitive::Blob(ref b) => blob_sdl(b),
                 // POV-Ray's mesh2 is a solid in CSG once it has an inside vector (its own
                 // parity test along that direction).
-                Primitive::Mesh(ref m) => format!("{} inside_vector <0.31, 0.73, 0.61>", mesh2_open(m.mesh(), false)),
+                Primitive::Mesh(ref m) => {
+                    format!("{} inside_vector <0.31, 0.73, 0.61>", mesh2_open(m.mesh(), false, None))
+                }
                 // A Rust closure has no SDL (and scene files cannot hold one): an empty
                 // isosurface over its box, so the rest of the scene still renders.
                 Primitive::Implicit(ref im) => {
@@ -239,13 +285,14 @@ fn blob_sdl(b: &strahl::Blob) -> String {
     )
 }
 
-fn mesh_sdl(name: &str, m: &TriangleMesh, smooth: bool) -> String {
-    format!("#declare {name} = {}}}\n", mesh2_open(m, smooth))
+fn mesh_sdl(name: &str, m: &TriangleMesh, smooth: bool, uvs: Option<&[[glam::Vec2; 3]]>) -> String {
+    format!("#declare {name} = {}}}\n", mesh2_open(m, smooth, uvs))
 }
 
 /// A `mesh2` of `m` without its closing brace (a solid adds its inside vector and texture):
-/// vertices, the vertex normals if `smooth`, and the hittable triangles.
-fn mesh2_open(m: &TriangleMesh, smooth: bool) -> String {
+/// vertices, the vertex normals if `smooth`, the hittable triangles, and their corners' texture
+/// coordinates where `uvs` gives them (one per triangle of `m`).
+fn mesh2_open(m: &TriangleMesh, smooth: bool, uvs: Option<&[[glam::Vec2; 3]]>) -> String {
     let mut s = format!("mesh2 {{\n  vertex_vectors {{ {}", m.positions().len());
     for p in m.positions() {
         write!(s, ", {}", v(*p)).unwrap();
@@ -262,17 +309,43 @@ fn mesh2_open(m: &TriangleMesh, smooth: bool) -> String {
     }
     // Degenerate triangles are left out (POV-Ray warns about each; neither engine hits them).
     let tris: Vec<usize> = (0..m.triangle_count()).filter(|&i| m.is_hittable(i)).collect();
+    // Corner coordinates as their own vectors, three per triangle (strahl keeps them per
+    // corner, as OBJ's `vt` indices may differ from the vertices').
+    let uvs = uvs.filter(|u| u.len() == m.triangle_count());
+    if let Some(uvs) = uvs {
+        write!(s, "  uv_vectors {{ {}", 3 * tris.len()).unwrap();
+        for &i in &tris {
+            for t in uvs[i] {
+                write!(s, ", <{}, {}>", t.x, t.y).unwrap();
+            }
+        }
+        s.push_str(" }\n");
+    }
     write!(s, "  face_indices {{ {}", tris.len()).unwrap();
     for &i in &tris {
         let [a, b, c] = m.indices()[i];
         write!(s, ", <{a}, {b}, {c}>").unwrap();
     }
     s.push_str(" }\n");
+    if uvs.is_some() {
+        write!(s, "  uv_indices {{ {}", tris.len()).unwrap();
+        for k in 0..tris.len() {
+            write!(s, ", <{}, {}, {}>", 3 * k, 3 * k + 1, 3 * k + 2).unwrap();
+        }
+        s.push_str(" }\n");
+    }
     s
 }
 
-/// The scene as POV-Ray SDL, rendered at `settings`.
-pub fn export(file: &SceneFile, objects: &[Vec<TriangleMesh>], settings: &Settings) -> anyhow::Result<String> {
+/// The scene as POV-Ray SDL, rendered at `settings`. `world` is the file's
+/// [`world`](SceneFile::world) for `objects`: the materials of OBJ groups and MTL files and the
+/// meshes' texture coordinates come from it.
+pub fn export(
+    file: &SceneFile,
+    objects: &[Vec<TriangleMesh>],
+    world: &World,
+    settings: &Settings,
+) -> anyhow::Result<String> {
     let cam = file.camera.ok_or_else(|| anyhow::anyhow!("{}: no camera", file.path.display()))?;
     let rc = cam.render_camera().ok_or_else(|| anyhow::anyhow!("bad camera"))?;
     let aspect = settings.width as f32 / settings.height as f32;
@@ -359,7 +432,8 @@ pub fn export(file: &SceneFile, objects: &[Vec<TriangleMesh>], settings: &Settin
     for (o, meshes) in objects.iter().enumerate() {
         for (g, m) in meshes.iter().enumerate() {
             if m.triangle_count() > 0 {
-                s.push_str(&mesh_sdl(&format!("M{o}_{g}"), m, file.mesh_shading[o].smooth));
+                let uvs = world.surfaces.geometry_shading(o, g).and_then(|(_, uvs)| uvs);
+                s.push_str(&mesh_sdl(&format!("M{o}_{g}"), m, file.mesh_shading[o].smooth, uvs));
             }
         }
     }
@@ -384,16 +458,26 @@ pub fn export(file: &SceneFile, objects: &[Vec<TriangleMesh>], settings: &Settin
             if mesh.triangle_count() == 0 {
                 continue;
             }
-            let mat = file.instance_materials[i]
-                .or_else(|| sh.groups.iter().find(|(n, _)| *n == mesh.name).map(|x| x.1))
-                .unwrap_or(sh.material);
-            let material = &file.materials[mat as usize].1;
-            writeln!(s, "object {{ M{}_{g} {} {matrix} }}", inst.object, material_sdl(material))?;
+            // The geometry's material as the renderer resolves it (scene file, OBJ group or
+            // MTL), unless the instance names one.
+            let (own, uvs) = world
+                .surfaces
+                .geometry_shading(inst.object, g)
+                .ok_or_else(|| anyhow::anyhow!("the world has no geometry {g} of object {}", inst.object))?;
+            let mat = file.instance_materials[i].unwrap_or(own);
+            let material = world.materials.get(mat as usize).ok_or_else(|| anyhow::anyhow!("no material {mat}"))?;
+            let tex = material_sdl(material, &world.textures, uvs.is_some());
+            writeln!(s, "object {{ M{}_{g} {tex} {matrix} }}", inst.object)?;
         }
         for k in 0..spheres[inst.object].len() {
             let mat = file.instance_materials[i].unwrap_or(sh.material);
             let material = &file.materials[mat as usize].1;
-            writeln!(s, "object {{ S{}_{k} {} {matrix} }}", inst.object, material_sdl(material))?;
+            writeln!(
+                s,
+                "object {{ S{}_{k} {} {matrix} }}",
+                inst.object,
+                material_sdl(material, &world.textures, false)
+            )?;
         }
         if let strahl::scene_file::MeshSource::Solid(solid) = &file.meshes[inst.object].1 {
             // One texture for the whole where the instance names one or every primitive has the
@@ -403,11 +487,15 @@ pub fn export(file: &SceneFile, objects: &[Vec<TriangleMesh>], settings: &Settin
                 file.instance_materials[i].or_else(|| leaves.iter().all(|&l| l == leaves[0]).then_some(leaves[0]));
             let textures: Vec<String> = match whole {
                 Some(_) => vec![String::new(); leaves.len()],
-                None => leaves.iter().map(|&l| material_sdl(&file.materials[l as usize].1)).collect(),
+                None => leaves
+                    .iter()
+                    .map(|&l| material_sdl(&file.materials[l as usize].1, &world.textures, false))
+                    .collect(),
             };
             let mut body = String::new();
             solid_sdl(solid, &mut textures.iter(), &mut body);
-            let tex = whole.map_or(String::new(), |m| material_sdl(&file.materials[m as usize].1));
+            let tex =
+                whole.map_or(String::new(), |m| material_sdl(&file.materials[m as usize].1, &world.textures, false));
             writeln!(s, "object {{ {body} {tex} {matrix} }}")?;
         }
     }

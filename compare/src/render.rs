@@ -439,7 +439,7 @@ pub fn compare_scene(
     let (mut povray_s, mut povray_psnr_db, mut povray_close) = (None, None, None);
     if crate::povray::available() {
         let pov = crate::povray::pov_path(out, &name);
-        std::fs::write(&pov, crate::povray::export(&file, &objects, &settings)?)?;
+        std::fs::write(&pov, crate::povray::export(&file, &objects, &world, &settings)?)?;
         let png = out.join(format!("{name}_povray.png"));
         let mut times = Vec::new();
         for _ in 0..passes.clamp(1, 3) {

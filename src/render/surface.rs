@@ -154,6 +154,13 @@ impl Surfaces {
         }
     }
 
+    /// Geometry `geom` of object `object`: its material and, where it has them, its texture
+    /// coordinates per triangle corner (for exporters; a hit's answer is [`resolve`](Self::resolve)).
+    pub fn geometry_shading(&self, object: usize, geom: usize) -> Option<(u32, Option<&[[Vec2; 3]]>)> {
+        let g = self.objects.get(object)?.get(geom)?;
+        Some((g.material, g.uvs.as_deref()))
+    }
+
     /// Materials referenced, for checking against the material table.
     pub fn max_material(&self) -> Option<u32> {
         let meshes = self.objects.iter().flatten().flat_map(|g| g.solid.iter().flatten().copied().chain([g.material]));

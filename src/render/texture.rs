@@ -1,7 +1,7 @@
 //! Image textures (OBJ `map_Kd`): decoded once into linear RGB, sampled with bilinear filtering
 //! and repeat wrapping.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use glam::{Vec2, Vec3};
 
@@ -19,6 +19,9 @@ pub struct ImageTexture {
     pub height: u32,
     /// Linear RGB texels, row by row from the top.
     pub texels: Vec<Vec3>,
+    /// The file it was read from (`None` for a texture made in memory): what an exporter to
+    /// another renderer points at.
+    pub source: Option<PathBuf>,
 }
 
 /// sRGB-encoded to linear (IEC 61966-2-1).
@@ -44,7 +47,7 @@ impl ImageTexture {
         let lut: Vec<f32> = (0..256).map(|i| srgb_to_linear(i as f32 / 255.0)).collect();
         let texels =
             img.pixels().map(|p| Vec3::new(lut[p[0] as usize], lut[p[1] as usize], lut[p[2] as usize])).collect();
-        Ok(Self { width, height, texels })
+        Ok(Self { width, height, texels, source: Some(path.to_path_buf()) })
     }
 
     /// The colour at texture coordinates `uv` (OBJ convention: v up, (0, 0) the bottom-left
@@ -73,7 +76,7 @@ mod tests {
 
     fn two_by_two() -> ImageTexture {
         // Top row: red, green; bottom row: blue, white.
-        ImageTexture { width: 2, height: 2, texels: vec![Vec3::X, Vec3::Y, Vec3::Z, Vec3::ONE] }
+        ImageTexture { width: 2, height: 2, texels: vec![Vec3::X, Vec3::Y, Vec3::Z, Vec3::ONE], source: None }
     }
 
     #[test]
