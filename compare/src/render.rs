@@ -352,7 +352,8 @@ fn diff8(a: &[u8], b: &[u8], tol: u8) -> (u8, u64) {
     (worst, count)
 }
 
-fn psnr(a: &[u8], b: &[u8]) -> f64 {
+/// Peak signal-to-noise ratio of two 8-bit images of the same size, in dB (infinite if equal).
+pub fn psnr(a: &[u8], b: &[u8]) -> f64 {
     let mse = a.iter().zip(b).map(|(x, y)| (*x as f64 - *y as f64).powi(2)).sum::<f64>() / a.len() as f64;
     if mse == 0.0 { f64::INFINITY } else { 10.0 * (255.0f64 * 255.0 / mse).log10() }
 }
