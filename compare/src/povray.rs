@@ -316,6 +316,8 @@ fn mesh2_open(m: &TriangleMesh, smooth: bool, uvs: Option<&[[glam::Vec2; 3]]>) -
         write!(s, "  uv_vectors {{ {}", 3 * tris.len()).unwrap();
         for &i in &tris {
             for t in uvs[i] {
+                // SDL has no NaN; strahl shades a non-finite coordinate with the top-left texel.
+                let t = if t.is_finite() { t } else { glam::Vec2::new(0.0, 1.0) };
                 write!(s, ", <{}, {}>", t.x, t.y).unwrap();
             }
         }
