@@ -217,21 +217,45 @@ impl Bvh {
                 (start..start + count).step_by(BLOCK).map(move |s| (s, (start + count - s).min(BLOCK)))
             })
             .collect();
-        let make_block = |&(start, n): &(usize, usize)| {
+        // Each triangle's corners sit behind its index triple, both scattered: with the loads of
+        // one block waiting on each other, the fill ran at memory latency. So the blocks ahead
+        // are asked for early: the index triples two blocks ahead, the corners one block ahead
+        // (whose triples the previous block asked for). Bunny on a Zen 4: the fill took 1.73
+        // instead of 2.33 ms at SSE2, 1.50 instead of 1.64 ms at AVX-512 (PERFORMANCE.md).
+        let locate = |p: &PrimRef| {
+            let id = p.id() as usize;
+            let g = offsets.partition_point(|&o| o <= id) - 1;
+            (g, id - offsets[g])
+        };
+        let make_block = |i: usize| {
+            let (start, n) = sources[i];
+            if let Some(&(s, n)) = sources.get(i + 2) {
+                for p in &prims[s..s + n] {
+                    let (g, local) = locate(p);
+                    crate::simd::prefetch(&meshes[g].indices()[local]);
+                }
+            }
+            if let Some(&(s, n)) = sources.get(i + 1) {
+                for p in &prims[s..s + n] {
+                    let (g, local) = locate(p);
+                    let (mesh, [a, b, c]) = (&meshes[g], meshes[g].indices()[local]);
+                    for v in [a, b, c] {
+                        crate::simd::prefetch(&mesh.positions()[v as usize]);
+                    }
+                }
+            }
             let mut tris = [(0u32, 0u32, [Vec3::ZERO; 3]); BLOCK];
             for (slot, p) in tris.iter_mut().zip(&prims[start..start + n]) {
-                let id = p.id() as usize;
-                let g = offsets.partition_point(|&o| o <= id) - 1;
-                let local = id - offsets[g];
+                let (g, local) = locate(p);
                 *slot = (g as u32, local as u32, meshes[g].triangle(local));
             }
             TriBlock::new(cfg.triangle_test, &tris[..n])
         };
         let mut blocks: Vec<TriBlock> = crate::sys::huge_vec(sources.len());
         if parallel {
-            blocks.par_extend(sources.par_iter().with_min_len(256).map(make_block));
+            blocks.par_extend((0..sources.len()).into_par_iter().with_min_len(256).map(make_block));
         } else {
-            blocks.extend(sources.iter().map(make_block));
+            blocks.extend((0..sources.len()).map(make_block));
         }
         let mut bvh = Bvh {
             nodes,
