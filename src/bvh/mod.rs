@@ -183,12 +183,16 @@ impl Bvh {
             return Err(Error::TooManyTriangles(total));
         }
         let unique = prims.len();
+        // A global primitive id as (mesh, triangle within it).
+        let locate = |id: usize| {
+            let g = offsets.partition_point(|&o| o <= id) - 1;
+            (g, id - offsets[g])
+        };
         let tree = if cfg.split_factor > 1.0 {
             // Spatial splits need the corners, and return their own reference array.
             let corners = |id: u32| {
-                let id = id as usize;
-                let g = offsets.partition_point(|&o| o <= id) - 1;
-                meshes[g].triangle(id - offsets[g]).map(Vec3A::from)
+                let (g, local) = locate(id as usize);
+                meshes[g].triangle(local).map(Vec3A::from)
             };
             spatial::build(std::mem::take(&mut prims), &corners, cfg).map(|(built, refs)| {
                 prims = refs;
@@ -222,22 +226,17 @@ impl Bvh {
         // are asked for early: the index triples two blocks ahead, the corners one block ahead
         // (whose triples the previous block asked for). Bunny on a Zen 4: the fill took 1.73
         // instead of 2.33 ms at SSE2, 1.50 instead of 1.64 ms at AVX-512 (PERFORMANCE.md).
-        let locate = |p: &PrimRef| {
-            let id = p.id() as usize;
-            let g = offsets.partition_point(|&o| o <= id) - 1;
-            (g, id - offsets[g])
-        };
         let make_block = |i: usize| {
             let (start, n) = sources[i];
             if let Some(&(s, n)) = sources.get(i + 2) {
                 for p in &prims[s..s + n] {
-                    let (g, local) = locate(p);
+                    let (g, local) = locate(p.id() as usize);
                     crate::simd::prefetch(&meshes[g].indices()[local]);
                 }
             }
             if let Some(&(s, n)) = sources.get(i + 1) {
                 for p in &prims[s..s + n] {
-                    let (g, local) = locate(p);
+                    let (g, local) = locate(p.id() as usize);
                     let (mesh, [a, b, c]) = (&meshes[g], meshes[g].indices()[local]);
                     for v in [a, b, c] {
                         crate::simd::prefetch(&mesh.positions()[v as usize]);
@@ -246,7 +245,7 @@ impl Bvh {
             }
             let mut tris = [(0u32, 0u32, [Vec3::ZERO; 3]); BLOCK];
             for (slot, p) in tris.iter_mut().zip(&prims[start..start + n]) {
-                let (g, local) = locate(p);
+                let (g, local) = locate(p.id() as usize);
                 *slot = (g as u32, local as u32, meshes[g].triangle(local));
             }
             TriBlock::new(cfg.triangle_test, &tris[..n])
