@@ -383,6 +383,7 @@ impl Bins {
         Self { boxes: [[[Aabb::EMPTY; 3]; MAX_BINS]; 2], counts: [[[0; 4]; MAX_BINS]; 2], n }
     }
 
+    #[inline(always)]
     fn reset(&mut self, n: usize) {
         self.n = n;
         for c in 0..2 {
@@ -401,6 +402,7 @@ impl Bins {
     }
 
     /// Folds the second copy into the first, which then holds the whole set.
+    #[inline(always)]
     fn settle(&mut self) {
         let ([first, second], [first_n, second_n]) = (&mut self.boxes, &mut self.counts);
         fold(self.n, (first, first_n), (second, second_n));
@@ -411,6 +413,7 @@ type BinBoxes = [[Aabb; 3]; MAX_BINS];
 type BinCounts = [[u32; 4]; MAX_BINS];
 
 /// Grows the first `n` bins of `to` by those of `from`.
+#[inline(always)]
 fn fold(n: usize, to: (&mut BinBoxes, &mut BinCounts), from: (&BinBoxes, &BinCounts)) {
     for (a, b) in to.0.iter_mut().zip(from.0).take(n) {
         for k in 0..3 {
@@ -572,14 +575,24 @@ pub(super) fn find_split(prims: &[PrimRef], cb: &Aabb, cfg: &Settings) -> Option
     // Small and medium sets bin into this thread's scratch bins, clearing only the bins in use:
     // clearing all 32 on every call cost about a quarter of a 6k-triangle build.
     SCRATCH.with(|cell| match cell.try_borrow_mut() {
-        Ok(mut b) => {
-            b.reset(nb);
-            bin_into(&mut b, prims, cb.lo, scale);
-            b.settle();
-            sweep(&b, cb, scale)
-        }
+        Ok(mut b) => bin_and_sweep(&mut b, nb, prims, cb, scale),
         Err(_) => find_split_fresh(prims, cb, nb, scale),
     })
+}
+
+/// Clears `nb` of `bins`, bins `prims` into them and sweeps them: the whole of a small or medium
+/// set's split search in one call at the active level, clearing and folding the bins included
+/// (at the crate's level in a dependency build those ran at SSE2).
+fn bin_and_sweep(bins: &mut Bins, nb: usize, prims: &[PrimRef], cb: &Aabb, scale: Vec3A) -> Option<Split> {
+    with_level!(|L| L::call(
+        #[inline(always)]
+        || {
+            bins.reset(nb);
+            bin_into_in(bins, prims, cb.lo, scale);
+            bins.settle();
+            sweep_in(bins, cb, scale)
+        }
+    ))
 }
 
 /// [`find_split`] for large sets: chunks binned in parallel, each fold into its own bins. Out of
