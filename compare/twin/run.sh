@@ -1,0 +1,68 @@
+#!/bin/bash
+# One-process A/B of strahl's native and dependency builds (PERFORMANCE.md, issue 32, session 54).
+#   compare/twin/run.sh [BASE_REV]      (default BASE_REV: HEAD)
+# Makes a throw-away workspace (TWIN_DIR, default target/twin) holding four copies of the library:
+# strahl_nat and strahl_dep from the working tree, strahl_nat0 and strahl_dep0 from BASE_REV.
+# The *_nat copies get `-C target-cpu=native` through Cargo's per-package profile rustflags (a
+# nightly feature, hence `cargo +nightly`); the *_dep copies get no flags, as a crate that depends
+# on strahl would build it. All four link into one binary, so each build runs in the same process
+# as its twin and the host's noise falls on both. Then, for example:
+#   RAYON_NUM_THREADS=1 target/twin/target/release/app scene.toml 150 nat dep
+set -euo pipefail
+repo=$(cd "$(dirname "$0")/../.." && pwd)
+base=${1:-HEAD}
+twin=${TWIN_DIR:-$repo/target/twin}
+mkdir -p "$twin/app/src"
+deps='glam = "0.34.2"
+image = { version = "0.25.10", default-features = false, features = ["png", "exr", "jpeg", "tga"] }
+rayon = "1.12.0"
+serde = { version = "1.0.229", features = ["derive"] }
+serde_json = "1.0.154"
+thiserror = "2.0.21"
+tobj = "4.0.5"
+toml = "1.2.1"
+wide = "1.7.1"
+libc = "0.2.191"'
+for v in nat dep nat0 dep0; do
+  d=$twin/strahl_$v
+  rm -rf "$d/src" && mkdir -p "$d"
+  if [ "${v%0}" = "$v" ]; then
+    cp -r "$repo/src" "$d/src"
+  else
+    mkdir -p "$d/src" && git -C "$repo" archive "$base" src | tar -x -C "$d"
+  fi
+  rm -rf "$d/src/bin"
+  printf '[package]\nname = "strahl_%s"\nversion = "0.1.0"\nedition = "2024"\n[dependencies]\n%s\n' "$v" "$deps" > "$d/Cargo.toml"
+done
+cat > "$twin/Cargo.toml" <<'TOML'
+cargo-features = ["profile-rustflags"]
+[workspace]
+members = ["app", "strahl_nat", "strahl_dep", "strahl_nat0", "strahl_dep0"]
+resolver = "2"
+[profile.release]
+codegen-units = 1
+lto = "thin"
+debug = 1
+[profile.release.package.strahl_nat]
+rustflags = ["-C", "target-cpu=native"]
+[profile.release.package.strahl_nat0]
+rustflags = ["-C", "target-cpu=native"]
+TOML
+cat > "$twin/app/Cargo.toml" <<'TOML'
+[package]
+name = "app"
+version = "0.1.0"
+edition = "2024"
+[dependencies]
+strahl_nat = { path = "../strahl_nat" }
+strahl_dep = { path = "../strahl_dep" }
+strahl_nat0 = { path = "../strahl_nat0" }
+strahl_dep0 = { path = "../strahl_dep0" }
+libc = "0.2.191"
+TOML
+cp "$repo/compare/twin/main.rs" "$twin/app/src/main.rs"
+cp "$repo/Cargo.lock" "$twin/Cargo.lock" 2>/dev/null || true
+# The workspace sits outside the repository's `.cargo/config.toml` only if TWIN_DIR says so; inside
+# `target/` that file's `target-cpu=native` would reach every copy, so it is overridden here.
+cd "$twin" && CARGO_BUILD_RUSTFLAGS="" RUSTFLAGS="" cargo +nightly build --release -p app
+echo "built $twin/target/release/app"
