@@ -3,17 +3,10 @@
 //! dependency build), `nat0` and `dep0` the same for a base commit. `app SCENE PAIRS A B`
 //! builds SCENE's meshes (one flattened scene) with A and B in turn, PAIRS times each (the
 //! order swapped every pair, three pairs of warm-up first), and prints the median and quartiles
-//! of the per-pair time ratio B/A, by wall clock and by process CPU time. Set up by `run.sh`.
+//! of the per-pair time ratio B/A, by wall clock. Set up by `run.sh`.
 use std::time::Instant;
 
-fn cpu() -> f64 {
-    let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
-    // SAFETY: `ts` is a valid, writable timespec; the clock id is a constant the kernel knows.
-    unsafe { libc::clock_gettime(libc::CLOCK_PROCESS_CPUTIME_ID, &mut ts) };
-    ts.tv_sec as f64 + ts.tv_nsec as f64 * 1e-9
-}
-
-type Run = Box<dyn FnMut() -> (f64, f64)>;
+type Run = Box<dyn FnMut() -> f64>;
 
 macro_rules! runner {
     ($k:ident, $path:expr) => {{
@@ -29,9 +22,9 @@ macro_rules! runner {
         let mut keep = None;
         Box::new(move || {
             let m = m.clone();
-            let (t, c) = (Instant::now(), cpu());
+            let t = Instant::now();
             let s = $k::Scene::build(m, &cfg).unwrap();
-            let r = (t.elapsed().as_secs_f64() * 1e3, (cpu() - c) * 1e3);
+            let r = t.elapsed().as_secs_f64() * 1e3;
             keep = Some(std::hint::black_box(s));
             r
         }) as Run
@@ -73,11 +66,10 @@ fn main() {
         q.sort_by(f64::total_cmp);
         (q[q.len() / 2], q[q.len() / 4], q[3 * q.len() / 4])
     };
-    let (w, wl, wh) = stat(va.iter().zip(&vb).map(|(x, y)| y.0 / x.0).collect());
-    let (c, cl, ch) = stat(va.iter().zip(&vb).map(|(x, y)| y.1 / x.1).collect());
-    let med = |v: &Vec<(f64, f64)>| stat(v.iter().map(|x| x.0).collect()).0;
+    let (w, wl, wh) = stat(va.iter().zip(&vb).map(|(x, y)| y / x).collect());
+    let med = |v: &Vec<f64>| stat(v.clone()).0;
     println!(
-        "{path} pairs {pairs}: {an} {:.2} ms, {bn} {:.2} ms (medians); {bn}/{an} time {w:.3} [IQR {wl:.3}-{wh:.3}], cpu {c:.3} [{cl:.3}-{ch:.3}]",
+        "{path} pairs {pairs}: {an} {:.2} ms, {bn} {:.2} ms (medians); {bn}/{an} time {w:.3} [IQR {wl:.3}-{wh:.3}]",
         med(&va),
         med(&vb)
     );

@@ -58,7 +58,6 @@ strahl_nat = { path = "../strahl_nat" }
 strahl_dep = { path = "../strahl_dep" }
 strahl_nat0 = { path = "../strahl_nat0" }
 strahl_dep0 = { path = "../strahl_dep0" }
-libc = "0.2.191"
 TOML
 cp "$repo/compare/twin/main.rs" "$twin/app/src/main.rs"
 cp "$repo/Cargo.lock" "$twin/Cargo.lock" 2>/dev/null || true
