@@ -618,10 +618,7 @@ fn find_split_parallel(prims: &[PrimRef], cb: &Aabb, nb: usize, scale: Vec3A) ->
 #[cold]
 #[inline(never)]
 fn find_split_fresh(prims: &[PrimRef], cb: &Aabb, nb: usize, scale: Vec3A) -> Option<Split> {
-    let mut b = Bins::new(nb);
-    bin_into(&mut b, prims, cb.lo, scale);
-    b.settle();
-    sweep(&b, cb, scale)
+    bin_and_sweep(&mut Bins::new(nb), nb, prims, cb, scale)
 }
 
 thread_local! {
