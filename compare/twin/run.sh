@@ -13,16 +13,27 @@ repo=$(cd "$(dirname "$0")/../.." && pwd)
 base=${1:-HEAD}
 twin=${TWIN_DIR:-$repo/target/twin}
 mkdir -p "$twin/app/src"
-deps='glam = "0.34.2"
-image = { version = "0.25.10", default-features = false, features = ["png", "exr", "jpeg", "tga"] }
-rayon = "1.12.0"
-serde = { version = "1.0.229", features = ["derive"] }
-serde_json = "1.0.154"
-thiserror = "2.0.21"
-tobj = "4.0.5"
-toml = "1.2.1"
-wide = "1.7.1"
-libc = "0.2.191"'
+# The library's own non-optional dependencies, as its Cargo.toml lists them (the Linux-only ones
+# included), so that the copies build against what the crate does.
+deps=$(python3 - "$repo/Cargo.toml" <<'PY'
+import sys, tomllib
+t = tomllib.load(open(sys.argv[1], "rb"))
+deps = dict(t["dependencies"])
+for table in t.get("target", {}).values():
+    deps.update(table.get("dependencies", {}))
+def value(v):
+    if isinstance(v, bool):
+        return str(v).lower()
+    if isinstance(v, str):
+        return '"%s"' % v
+    if isinstance(v, list):
+        return "[" + ", ".join(value(x) for x in v) + "]"
+    return "{ " + ", ".join("%s = %s" % (k, value(x)) for k, x in v.items() if k != "optional") + " }"
+for name, v in deps.items():
+    if not (isinstance(v, dict) and v.get("optional")):
+        print("%s = %s" % (name, value(v)))
+PY
+)
 for v in nat dep nat0 dep0; do
   d=$twin/strahl_$v
   rm -rf "$d/src" && mkdir -p "$d"
