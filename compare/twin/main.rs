@@ -3,10 +3,122 @@
 //! dependency build), `nat0` and `dep0` the same for a base commit. `app SCENE PAIRS A B`
 //! builds SCENE's meshes (one flattened scene) with A and B in turn, PAIRS times each (the
 //! order swapped every pair, three pairs of warm-up first), and prints the median and quartiles
-//! of the per-pair time ratio B/A, by wall clock. Set up by `run.sh`.
+//! of the per-pair time ratio B/A, by wall clock. `app SCENE PAIRS A B CLASS API` times ray
+//! queries instead: CLASS is `primary`, `shadow` or `diffuse` (the harness's classes, from the
+//! scene file's camera and first light, 1024² primary rays, seed 1, epsilon 1e-4 × the scene's
+//! diagonal) and API `stream`, `packet` or `single`. The rays are made once, by `nat`, and every
+//! build traces the same ones; the builds' answers are compared before timing. Set up by
+//! `run.sh`.
 use std::time::Instant;
 
 type Run = Box<dyn FnMut() -> f64>;
+
+/// A ray set as plain arrays (ox, oy, oz, dx, dy, dz, tnear, tfar), so that every copy of the
+/// library can make its own `RayStream` of the same rays.
+type Rays = [Vec<f32>; 8];
+
+const WIDTH: u32 = 1024;
+
+/// The class's rays, made by the `nat` copy the way the harness makes them.
+fn make_rays(path: &str, class: &str) -> Rays {
+    use strahl_nat::{Coherence, HitStream, Query, raygen};
+    let file = strahl_nat::SceneFile::read(path).unwrap();
+    let scene = file.build(&Default::default()).unwrap().flatten(&Default::default()).unwrap();
+    let camera = file.camera.as_ref().expect("the scene file needs a camera").camera();
+    let light = file.lights.first().expect("the scene file needs a light").position;
+    let (primary, _) = raygen::primary(&camera, WIDTH, WIDTH);
+    let mut hits = HitStream::default();
+    scene.intersect_stream(&primary, &mut hits, Coherence::Coherent);
+    let diag = scene.bounds().map(|(lo, hi)| (hi - lo).length()).unwrap_or(1.0);
+    let offset = raygen::Offset::Epsilon(1e-4 * diag);
+    let r = match class {
+        "primary" => primary,
+        "shadow" => raygen::shadow_with(&primary, &hits, light, offset).0,
+        "diffuse" => raygen::diffuse_with(&primary, &hits, 1, offset).0,
+        _ => panic!("unknown class {class}"),
+    };
+    [r.ox, r.oy, r.oz, r.dx, r.dy, r.dz, r.tnear, r.tfar]
+}
+
+/// Traces `rays` through one copy's flattened scene with one API: a closure that returns the
+/// time in ms and the answers (t of closest hits, 0/1 for occlusion).
+macro_rules! tracer {
+    ($k:ident, $path:expr, $rays:expr, $class:expr, $api:expr) => {{
+        use $k::{Coherence, HitPacket, HitStream, PACKET_WIDTH, Query, RayStream};
+        let file = $k::SceneFile::read($path).unwrap();
+        let scene = file.build(&Default::default()).unwrap().flatten(&Default::default()).unwrap();
+        let r = $rays.clone();
+        let rays = RayStream {
+            ox: r[0].clone(),
+            oy: r[1].clone(),
+            oz: r[2].clone(),
+            dx: r[3].clone(),
+            dy: r[4].clone(),
+            dz: r[5].clone(),
+            tnear: r[6].clone(),
+            tfar: r[7].clone(),
+        };
+        let occlusion = $class == "shadow";
+        let coherence = if $class == "primary" { Coherence::Coherent } else { Coherence::Incoherent };
+        let api = $api.to_string();
+        let n = rays.len();
+        let mut hits = HitStream::default();
+        let mut occ = Vec::new();
+        let mut out = vec![0f32; n];
+        Box::new(move || {
+            let t = Instant::now();
+            match (api.as_str(), occlusion) {
+                ("stream", true) => scene.occluded_stream(&rays, &mut occ, coherence),
+                ("stream", false) => scene.intersect_stream(&rays, &mut hits, coherence),
+                ("packet", _) => {
+                    let mut hp = HitPacket::default();
+                    for k in (0..n).step_by(PACKET_WIDTH) {
+                        let m = (n - k).min(PACKET_WIDTH);
+                        let p = rays.packet(k, m);
+                        if occlusion {
+                            let bits = scene.occluded_packet(&p);
+                            for l in 0..m {
+                                out[k + l] = (bits >> l & 1) as f32;
+                            }
+                        } else {
+                            scene.intersect_packet(&p, &mut hp);
+                            out[k..k + m].copy_from_slice(&hp.t[..m]);
+                        }
+                    }
+                }
+                ("single", _) => {
+                    for (i, o) in out.iter_mut().enumerate() {
+                        let r = rays.get(i);
+                        *o = if occlusion {
+                            scene.occluded(&r) as u8 as f32
+                        } else {
+                            scene.intersect(&r).map_or(f32::INFINITY, |h| h.t)
+                        };
+                    }
+                }
+                _ => panic!("unknown api {api}"),
+            }
+            let ms = t.elapsed().as_secs_f64() * 1e3;
+            match (api.as_str(), occlusion) {
+                ("stream", true) => (ms, occ.iter().map(|&b| b as u8 as f32).collect()),
+                ("stream", false) => (ms, (0..n).map(|i| hits.get(i).map_or(f32::INFINITY, |h| h.t)).collect()),
+                _ => (ms, out.clone()),
+            }
+        }) as Trace
+    }};
+}
+
+type Trace = Box<dyn FnMut() -> (f64, Vec<f32>)>;
+
+fn make_trace(name: &str, path: &str, rays: &Rays, class: &str, api: &str) -> Trace {
+    match name {
+        "nat" => tracer!(strahl_nat, path, rays, class, api),
+        "dep" => tracer!(strahl_dep, path, rays, class, api),
+        "nat0" => tracer!(strahl_nat0, path, rays, class, api),
+        "dep0" => tracer!(strahl_dep0, path, rays, class, api),
+        _ => panic!("unknown build {name}"),
+    }
+}
 
 macro_rules! runner {
     ($k:ident, $path:expr) => {{
@@ -47,7 +159,30 @@ fn main() {
     let pairs: usize = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(50);
     let an = args.get(3).cloned().unwrap_or_else(|| "nat".into());
     let bn = args.get(4).cloned().unwrap_or_else(|| "dep".into());
-    let (mut a, mut b) = (make(&an, path), make(&bn, path));
+    let (mut a, mut b): (Run, Run) = match args.get(5) {
+        None => (make(&an, path), make(&bn, path)),
+        Some(class) => {
+            let api = args.get(6).map_or("stream", |s| s.as_str());
+            let rays = make_rays(path, class);
+            let (mut ta, mut tb) = (make_trace(&an, path, &rays, class, api), make_trace(&bn, path, &rays, class, api));
+            let (ra, rb) = (ta().1, tb().1);
+            // Hit or miss (occluded or not) alike, and the largest relative t difference where
+            // both hit: the builds may round differently (FMA or not), no more.
+            let agree = ra.iter().zip(&rb).filter(|(x, y)| x.is_finite() == y.is_finite()).count();
+            let same = ra.iter().zip(&rb).filter(|(x, y)| x == y).count();
+            let worst = ra
+                .iter()
+                .zip(&rb)
+                .filter(|(x, y)| x.is_finite() && y.is_finite() && **x > 0.0)
+                .map(|(x, y)| ((x - y) / x).abs())
+                .fold(0f32, f32::max);
+            println!(
+                "{class} {api}: {} rays; {an} and {bn} agree on {agree} hits or misses, {same} answers bit-identical, largest relative t difference {worst:.1e}",
+                ra.len()
+            );
+            (Box::new(move || ta().0), Box::new(move || tb().0))
+        }
+    };
     for _ in 0..3 {
         a();
         b();

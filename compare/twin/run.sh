@@ -8,6 +8,8 @@
 # on strahl would build it. All four link into one binary, so each build runs in the same process
 # as its twin and the host's noise falls on both. Then, for example:
 #   RAYON_NUM_THREADS=1 target/twin/target/release/app scene.toml 150 nat dep
+# and for ray queries (scene files with the harness's views and lights are in compare/twin/scenes):
+#   RAYON_NUM_THREADS=1 target/twin/target/release/app compare/twin/scenes/sponza.toml 40 nat dep shadow stream
 set -euo pipefail
 repo=$(cd "$(dirname "$0")/../.." && pwd)
 base=${1:-HEAD}
