@@ -41,7 +41,7 @@ fn make_rays(path: &str, class: &str) -> Rays {
 }
 
 /// Traces `rays` through one copy's flattened scene with one API: a closure that returns the
-/// time in ms and the answers (t of closest hits, 0/1 for occlusion).
+/// time in ms and the answers (t and primitive of closest hits, 0/1 for occlusion).
 macro_rules! tracer {
     ($k:ident, $path:expr, $rays:expr, $class:expr, $api:expr) => {{
         use $k::{Coherence, HitPacket, HitStream, PACKET_WIDTH, Query, RayStream};
@@ -64,7 +64,7 @@ macro_rules! tracer {
         let n = rays.len();
         let mut hits = HitStream::default();
         let mut occ = Vec::new();
-        let mut out = vec![0f32; n];
+        let mut out = vec![(0f32, 0u32); n];
         Box::new(move || {
             let t = Instant::now();
             match (api.as_str(), occlusion) {
@@ -78,11 +78,13 @@ macro_rules! tracer {
                         if occlusion {
                             let bits = scene.occluded_packet(&p);
                             for l in 0..m {
-                                out[k + l] = (bits >> l & 1) as f32;
+                                out[k + l] = ((bits >> l & 1) as f32, 0);
                             }
                         } else {
                             scene.intersect_packet(&p, &mut hp);
-                            out[k..k + m].copy_from_slice(&hp.t[..m]);
+                            for l in 0..m {
+                                out[k + l] = (hp.t[l], hp.prim_id[l]);
+                            }
                         }
                     }
                 }
@@ -90,9 +92,9 @@ macro_rules! tracer {
                     for (i, o) in out.iter_mut().enumerate() {
                         let r = rays.get(i);
                         *o = if occlusion {
-                            scene.occluded(&r) as u8 as f32
+                            (scene.occluded(&r) as u8 as f32, 0)
                         } else {
-                            scene.intersect(&r).map_or(f32::INFINITY, |h| h.t)
+                            scene.intersect(&r).map_or((f32::INFINITY, u32::MAX), |h| (h.t, h.prim_id))
                         };
                     }
                 }
@@ -100,15 +102,17 @@ macro_rules! tracer {
             }
             let ms = t.elapsed().as_secs_f64() * 1e3;
             match (api.as_str(), occlusion) {
-                ("stream", true) => (ms, occ.iter().map(|&b| b as u8 as f32).collect()),
-                ("stream", false) => (ms, (0..n).map(|i| hits.get(i).map_or(f32::INFINITY, |h| h.t)).collect()),
+                ("stream", true) => (ms, occ.iter().map(|&b| (b as u8 as f32, 0)).collect()),
+                ("stream", false) => {
+                    (ms, (0..n).map(|i| hits.get(i).map_or((f32::INFINITY, u32::MAX), |h| (h.t, h.prim_id))).collect())
+                }
                 _ => (ms, out.clone()),
             }
         }) as Trace
     }};
 }
 
-type Trace = Box<dyn FnMut() -> (f64, Vec<f32>)>;
+type Trace = Box<dyn FnMut() -> (f64, Vec<(f32, u32)>)>;
 
 fn make_trace(name: &str, path: &str, rays: &Rays, class: &str, api: &str) -> Trace {
     match name {
@@ -166,18 +170,21 @@ fn main() {
             let rays = make_rays(path, class);
             let (mut ta, mut tb) = (make_trace(&an, path, &rays, class, api), make_trace(&bn, path, &rays, class, api));
             let (ra, rb) = (ta().1, tb().1);
-            // Hit or miss (occluded or not) alike, and the largest relative t difference where
-            // both hit: the builds may round differently (FMA or not), no more.
-            let agree = ra.iter().zip(&rb).filter(|(x, y)| x.is_finite() == y.is_finite()).count();
+            // Hit or miss (occluded or not) alike, the same primitive, and the largest relative t
+            // difference where both hit the same one: the builds may round differently (FMA or
+            // not), no more.
+            let agree = ra.iter().zip(&rb).filter(|(x, y)| x.0.is_finite() == y.0.is_finite()).count();
+            let same_prim = ra.iter().zip(&rb).filter(|(x, y)| x.1 == y.1).count();
             let same = ra.iter().zip(&rb).filter(|(x, y)| x == y).count();
             let worst = ra
                 .iter()
                 .zip(&rb)
-                .filter(|(x, y)| x.is_finite() && y.is_finite() && **x > 0.0)
-                .map(|(x, y)| ((x - y) / x).abs())
+                .filter(|(x, y)| x.1 == y.1 && x.0.is_finite() && y.0.is_finite() && x.0 > 0.0)
+                .map(|(x, y)| ((x.0 - y.0) / x.0).abs())
                 .fold(0f32, f32::max);
             println!(
-                "{class} {api}: {} rays; {an} and {bn} agree on {agree} hits or misses, {same} answers bit-identical, largest relative t difference {worst:.1e}",
+                "{class} {api}: {} rays; {an} and {bn} agree on {agree} hits or misses and {same_prim} primitives, \
+                 {same} answers bit-identical, largest relative t difference on the same primitive {worst:.1e}",
                 ra.len()
             );
             (Box::new(move || ta().0), Box::new(move || tb().0))
