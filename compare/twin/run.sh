@@ -5,7 +5,9 @@
 # strahl_nat and strahl_dep from the working tree, strahl_nat0 and strahl_dep0 from BASE_REV.
 # The *_nat copies get `-C target-cpu=native` through Cargo's per-package profile rustflags (a
 # nightly feature, hence `cargo +nightly`); the *_dep copies get no flags, as a crate that depends
-# on strahl would build it. All four link into one binary, so each build runs in the same process
+# on strahl would build it. The native copies also get their own natively built copies of `wide`,
+# `safe_arch` and `glam` (before session 55 they shared the baseline ones, a hybrid that is not the
+# native build: its rays ran at half speed). All four link into one binary, so each build runs in the same process
 # as its twin and the host's noise falls on both. Then, for example:
 #   RAYON_NUM_THREADS=1 target/twin/target/release/app scene.toml 150 nat dep
 # and for ray queries (scene files with the harness's views and lights are in compare/twin/scenes):
@@ -36,6 +38,49 @@ for name, v in deps.items():
         print("%s = %s" % (name, value(v)))
 PY
 )
+# `wide`, `safe_arch` and `glam` choose their code by `cfg(target_feature)` when they are compiled,
+# so a native build compiles them natively too. The *_nat copies therefore get their own copies of
+# these three (packages wide_nat, safe_arch_nat, glam_nat, crate names unchanged) with the same
+# flags; the *_dep copies share the registry's, built without.
+reg=$(cd "$repo" && cargo metadata --format-version 1 2>/dev/null | python3 -c '
+import json, sys, os
+m = json.load(sys.stdin)
+for p in m["packages"]:
+    if p["name"] in ("wide", "safe_arch", "glam") and p["source"]:
+        print(p["name"], p["version"], os.path.dirname(p["manifest_path"]))')
+while read -r name version dir; do
+  d=$twin/${name}_nat
+  rm -rf "$d" && mkdir -p "$d" && cp -r "$dir/src" "$d/src"
+  case $name in
+    wide) extra='[features]
+default = ["std"]
+std = []
+[dependencies]
+bytemuck = "1.24.0"
+safe_arch = { package = "safe_arch_nat", path = "../safe_arch_nat", features = ["bytemuck"] }' ;;
+    safe_arch) extra='[dependencies]
+bytemuck = { version = "1.24.0", optional = true }' ;;
+    glam) extra='[features]
+default = ["std", "f64", "i8", "u8", "i16", "u16", "i32", "u32", "i64", "u64", "isize", "usize"]
+std = []
+f64 = []
+i8 = []
+u8 = []
+i16 = []
+u16 = []
+i32 = []
+u32 = []
+i64 = []
+u64 = []
+isize = []
+usize = []' ;;
+  esac
+  printf '[package]\nname = "%s_nat"\nversion = "%s"\nedition = "2024"\n[lib]\nname = "%s"\npath = "src/lib.rs"\n%s\n' \
+    "$name" "$version" "$name" "$extra" > "$d/Cargo.toml"
+done <<< "$reg"
+[ "$(wc -l <<< "$reg")" = 3 ] || { echo "wide, safe_arch or glam not found in cargo metadata" >&2; exit 1; }
+deps_nat=$(sed -e 's|^wide = .*|wide = { package = "wide_nat", path = "../wide_nat" }|' \
+  -e 's|^glam = .*|glam = { package = "glam_nat", path = "../glam_nat" }|' <<< "$deps")
 for v in nat dep nat0 dep0; do
   d=$twin/strahl_$v
   rm -rf "$d/src" && mkdir -p "$d"
@@ -45,7 +90,8 @@ for v in nat dep nat0 dep0; do
     mkdir -p "$d/src" && git -C "$repo" archive "$base" src | tar -x -C "$d"
   fi
   rm -rf "$d/src/bin"
-  printf '[package]\nname = "strahl_%s"\nversion = "0.1.0"\nedition = "2024"\n[dependencies]\n%s\n' "$v" "$deps" > "$d/Cargo.toml"
+  if [ "${v#nat}" != "$v" ]; then vdeps=$deps_nat; else vdeps=$deps; fi
+  printf '[package]\nname = "strahl_%s"\nversion = "0.1.0"\nedition = "2024"\n[dependencies]\n%s\n' "$v" "$vdeps" > "$d/Cargo.toml"
 done
 cat > "$twin/Cargo.toml" <<'TOML'
 cargo-features = ["profile-rustflags"]
@@ -59,6 +105,12 @@ debug = 1
 [profile.release.package.strahl_nat]
 rustflags = ["-C", "target-cpu=native"]
 [profile.release.package.strahl_nat0]
+rustflags = ["-C", "target-cpu=native"]
+[profile.release.package.wide_nat]
+rustflags = ["-C", "target-cpu=native"]
+[profile.release.package.safe_arch_nat]
+rustflags = ["-C", "target-cpu=native"]
+[profile.release.package.glam_nat]
 rustflags = ["-C", "target-cpu=native"]
 TOML
 cat > "$twin/app/Cargo.toml" <<'TOML'
