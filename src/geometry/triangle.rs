@@ -93,6 +93,12 @@ impl TriBlock {
         b
     }
 
+    /// Bit `l` set for each lane `l` that holds a triangle (the filled lanes come first).
+    #[inline(always)]
+    pub fn filled(&self) -> u32 {
+        self.prim.iter().enumerate().fold(0, |m, (l, &p)| m | u32::from(p != u32::MAX) << l)
+    }
+
     /// The geometry id of lane `lane` (without Badouel's extra bits).
     #[inline(always)]
     pub fn geom_id(&self, test: TriangleTest, lane: usize) -> u32 {
