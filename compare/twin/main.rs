@@ -41,7 +41,7 @@ fn make_rays(path: &str, class: &str) -> Rays {
 }
 
 /// Traces `rays` through one copy's flattened scene with one API: a closure that returns the
-/// time in ms and the answers (t and primitive of closest hits, 0/1 for occlusion).
+/// time in ms and the answers (t and primitive of closest hits; for occlusion see [`occluded`]).
 macro_rules! tracer {
     ($k:ident, $path:expr, $rays:expr, $class:expr, $api:expr) => {{
         use $k::{Coherence, HitPacket, HitStream, PACKET_WIDTH, Query, RayStream};
@@ -78,7 +78,7 @@ macro_rules! tracer {
                         if occlusion {
                             let bits = scene.occluded_packet(&p);
                             for l in 0..m {
-                                out[k + l] = ((bits >> l & 1) as f32, 0);
+                                out[k + l] = (occluded(bits >> l & 1 != 0), 0);
                             }
                         } else {
                             scene.intersect_packet(&p, &mut hp);
@@ -92,7 +92,7 @@ macro_rules! tracer {
                     for (i, o) in out.iter_mut().enumerate() {
                         let r = rays.get(i);
                         *o = if occlusion {
-                            (scene.occluded(&r) as u8 as f32, 0)
+                            (occluded(scene.occluded(&r)), 0)
                         } else {
                             scene.intersect(&r).map_or((f32::INFINITY, u32::MAX), |h| (h.t, h.prim_id))
                         };
@@ -102,7 +102,7 @@ macro_rules! tracer {
             }
             let ms = t.elapsed().as_secs_f64() * 1e3;
             match (api.as_str(), occlusion) {
-                ("stream", true) => (ms, occ.iter().map(|&b| (b as u8 as f32, 0)).collect()),
+                ("stream", true) => (ms, occ.iter().map(|&b| (occluded(b), 0)).collect()),
                 ("stream", false) => {
                     (ms, (0..n).map(|i| hits.get(i).map_or((f32::INFINITY, u32::MAX), |h| (h.t, h.prim_id))).collect())
                 }
@@ -113,6 +113,11 @@ macro_rules! tracer {
 }
 
 type Trace = Box<dyn FnMut() -> (f64, Vec<(f32, u32)>)>;
+
+/// An occlusion answer in the closest-hit form: 0 where occluded (finite, a hit), +inf where not.
+fn occluded(o: bool) -> f32 {
+    if o { 0.0 } else { f32::INFINITY }
+}
 
 fn make_trace(name: &str, path: &str, rays: &Rays, class: &str, api: &str) -> Trace {
     match name {
