@@ -47,17 +47,8 @@ macro_rules! tracer {
         use $k::{Coherence, HitPacket, HitStream, PACKET_WIDTH, Query, RayStream};
         let file = $k::SceneFile::read($path).unwrap();
         let scene = file.build(&Default::default()).unwrap().flatten(&Default::default()).unwrap();
-        let r = $rays.clone();
-        let rays = RayStream {
-            ox: r[0].clone(),
-            oy: r[1].clone(),
-            oz: r[2].clone(),
-            dx: r[3].clone(),
-            dy: r[4].clone(),
-            dz: r[5].clone(),
-            tnear: r[6].clone(),
-            tfar: r[7].clone(),
-        };
+        let [ox, oy, oz, dx, dy, dz, tnear, tfar] = $rays.clone();
+        let rays = RayStream { ox, oy, oz, dx, dy, dz, tnear, tfar };
         let occlusion = $class == "shadow";
         let coherence = if $class == "primary" { Coherence::Coherent } else { Coherence::Incoherent };
         let api = $api.to_string();
