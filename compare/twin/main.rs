@@ -6,7 +6,8 @@
 //! of the per-pair time ratio B/A, by wall clock. `app SCENE PAIRS A B CLASS API` times ray
 //! queries instead: CLASS is `primary`, `shadow` or `diffuse` (the harness's classes, from the
 //! scene file's camera and first light, 1024² primary rays, seed 1, epsilon 1e-4 × the scene's
-//! diagonal) and API `stream`, `packet` or `single`. The rays are made once, by `nat`, and every
+//! diagonal) and API `stream`, `packet` or `single`; a build named `nat:avx512` (any level name
+//! after a colon) runs that copy at that kernel level. The rays are made once, by `nat`, and every
 //! build traces the same ones; the builds' answers are compared before timing. Set up by
 //! `run.sh`.
 use std::time::Instant;
@@ -43,8 +44,13 @@ fn make_rays(path: &str, class: &str) -> Rays {
 /// Traces `rays` through one copy's flattened scene with one API: a closure that returns the
 /// time in ms and the answers (t and primitive of closest hits; for occlusion see [`occluded`]).
 macro_rules! tracer {
-    ($k:ident, $path:expr, $rays:expr, $class:expr, $api:expr) => {{
-        use $k::{Coherence, HitPacket, HitStream, PACKET_WIDTH, Query, RayStream};
+    ($k:ident, $path:expr, $rays:expr, $class:expr, $api:expr, $level:expr) => {{
+        use $k::{Coherence, HitPacket, HitStream, Isa, PACKET_WIDTH, Query, RayStream};
+        // The copy's kernel level for this run: the named one, else the copy's own choice.
+        let isa = match $level {
+            Some(name) => Isa::from_name(name).unwrap_or_else(|| panic!("unknown level {name}")),
+            None => Isa::best(),
+        };
         let file = $k::SceneFile::read($path).unwrap();
         let scene = file.build(&Default::default()).unwrap().flatten(&Default::default()).unwrap();
         let [ox, oy, oz, dx, dy, dz, tnear, tfar] = $rays.clone();
@@ -57,6 +63,7 @@ macro_rules! tracer {
         let mut occ = Vec::new();
         let mut out = vec![(0f32, 0u32); n];
         Box::new(move || {
+            $k::set_isa(isa).unwrap();
             let t = Instant::now();
             match (api.as_str(), occlusion) {
                 ("stream", true) => scene.occluded_stream(&rays, &mut occ, coherence),
@@ -110,12 +117,15 @@ fn occluded(o: bool) -> f32 {
     if o { 0.0 } else { f32::INFINITY }
 }
 
+/// A build's tracer; `name` may carry a kernel level after a colon (`nat:avx512`), set before
+/// each of its runs, so that two levels of one copy can alternate.
 fn make_trace(name: &str, path: &str, rays: &Rays, class: &str, api: &str) -> Trace {
+    let (name, level) = name.split_once(':').map_or((name, None), |(n, l)| (n, Some(l)));
     match name {
-        "nat" => tracer!(strahl_nat, path, rays, class, api),
-        "dep" => tracer!(strahl_dep, path, rays, class, api),
-        "nat0" => tracer!(strahl_nat0, path, rays, class, api),
-        "dep0" => tracer!(strahl_dep0, path, rays, class, api),
+        "nat" => tracer!(strahl_nat, path, rays, class, api, level),
+        "dep" => tracer!(strahl_dep, path, rays, class, api, level),
+        "nat0" => tracer!(strahl_nat0, path, rays, class, api, level),
+        "dep0" => tracer!(strahl_dep0, path, rays, class, api, level),
         _ => panic!("unknown build {name}"),
     }
 }
