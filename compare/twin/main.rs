@@ -3,7 +3,8 @@
 //! dependency build), `nat0` and `dep0` the same for a base commit. `app SCENE PAIRS A B`
 //! builds SCENE's meshes (one flattened scene) with A and B in turn, PAIRS times each (the
 //! order swapped every pair, three pairs of warm-up first), and prints the median and quartiles
-//! of the per-pair time ratio B/A, by wall clock. `app SCENE PAIRS A B CLASS API` times ray
+//! of the per-pair time ratio B/A, by wall clock (`app SCENE PAIRS A B high`: with
+//! `BuildConfig::high`, spatial splits). `app SCENE PAIRS A B CLASS API` times ray
 //! queries instead: CLASS is `primary`, `shadow` or `diffuse` (the harness's classes, from the
 //! scene file's camera and first light, 1024² primary rays, seed 1, epsilon 1e-4 × the scene's
 //! diagonal) and API `stream`, `packet` or `single`; a build named `nat:avx512` (any level name
@@ -131,7 +132,7 @@ fn make_trace(name: &str, path: &str, rays: &Rays, class: &str, api: &str) -> Tr
 }
 
 macro_rules! runner {
-    ($k:ident, $path:expr) => {{
+    ($k:ident, $path:expr, $high:expr) => {{
         let m = $k::SceneFile::read($path)
             .unwrap()
             .build(&Default::default())
@@ -140,7 +141,7 @@ macro_rules! runner {
             .unwrap()
             .meshes()
             .to_vec();
-        let cfg = $k::BuildConfig::default();
+        let cfg = if $high { $k::BuildConfig::high() } else { $k::BuildConfig::default() };
         let mut keep = None;
         Box::new(move || {
             let m = m.clone();
@@ -153,12 +154,14 @@ macro_rules! runner {
     }};
 }
 
-fn make(name: &str, path: &str) -> Run {
+/// A build's builder run: the default settings, or with `high` those of `BuildConfig::high`
+/// (spatial splits).
+fn make(name: &str, path: &str, high: bool) -> Run {
     match name {
-        "nat" => runner!(strahl_nat, path),
-        "dep" => runner!(strahl_dep, path),
-        "nat0" => runner!(strahl_nat0, path),
-        "dep0" => runner!(strahl_dep0, path),
+        "nat" => runner!(strahl_nat, path, high),
+        "dep" => runner!(strahl_dep, path, high),
+        "nat0" => runner!(strahl_nat0, path, high),
+        "dep0" => runner!(strahl_dep0, path, high),
         _ => panic!("unknown build {name}"),
     }
 }
@@ -170,7 +173,8 @@ fn main() {
     let an = args.get(3).cloned().unwrap_or_else(|| "nat".into());
     let bn = args.get(4).cloned().unwrap_or_else(|| "dep".into());
     let (mut a, mut b): (Run, Run) = match args.get(5) {
-        None => (make(&an, path), make(&bn, path)),
+        None => (make(&an, path, false), make(&bn, path, false)),
+        Some(q) if q == "high" => (make(&an, path, true), make(&bn, path, true)),
         Some(class) => {
             let api = args.get(6).map_or("stream", |s| s.as_str());
             let rays = make_rays(path, class);
