@@ -239,3 +239,45 @@ fn spatial_splits_match_brute_force() {
         }
     }
 }
+
+#[test]
+fn interleaved_meshes_report_their_own_triangles() {
+    // A 40 × 40 grid of small triangles on z = 0, cell k in mesh (k · 7) mod 13 of 16 meshes
+    // (meshes 0, 6 and 15 empty), so that leaves mix meshes and the builder's fill has to find
+    // each triangle's mesh. A ray straight down onto each cell must report that cell's mesh and
+    // its index there: the brute force walks the same blocks, so it cannot catch a block filled
+    // from the wrong mesh.
+    const N: usize = 40;
+    let full = [1, 2, 3, 4, 5, 7, 8, 9, 10, 11, 12, 13, 14];
+    let mut meshes: Vec<(Vec<Vec3>, Vec<[u32; 3]>)> = vec![(Vec::new(), Vec::new()); 16];
+    let mut expect = Vec::new();
+    for k in 0..N * N {
+        let (x, y) = ((k % N) as f32, (k / N) as f32);
+        let g = full[k * 7 % full.len()];
+        let (p, idx) = &mut meshes[g];
+        let base = p.len() as u32;
+        p.extend([Vec3::new(x, y, 0.0), Vec3::new(x + 0.8, y, 0.0), Vec3::new(x, y + 0.8, 0.0)]);
+        expect.push((Vec3::new(x + 0.2, y + 0.2, 1.0), g as u32, idx.len() as u32));
+        idx.push([base, base + 1, base + 2]);
+    }
+    let meshes: Vec<_> = meshes
+        .into_iter()
+        .enumerate()
+        .map(|(g, (p, i))| strahl::TriangleMesh::new(format!("m{g}"), p, i).unwrap())
+        .collect();
+    for cfg in [
+        BuildConfig::default(),
+        BuildConfig::fast(),
+        BuildConfig::high(),
+        BuildConfig { parallel_threshold: 64, ..BuildConfig::default() },
+    ] {
+        let scene = Scene::build(meshes.clone(), &cfg).unwrap();
+        for &(o, g, p) in &expect {
+            let h = scene
+                .intersect(&Ray::new(o, Vec3::NEG_Z))
+                .unwrap_or_else(|| panic!("{cfg:?}: cell of mesh {g} missed"));
+            assert_eq!((h.geom_id, h.prim_id), (g, p), "{cfg:?}");
+            assert!((h.t - 1.0).abs() < 1e-6, "{cfg:?}: t {}", h.t);
+        }
+    }
+}
