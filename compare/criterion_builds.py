@@ -25,19 +25,8 @@ import subprocess
 import sys
 import tempfile
 
-
-def parse_build(text):
-    label, _, rest = text.partition("=")
-    if not label or not rest:
-        raise argparse.ArgumentTypeError(f"{text}: expected LABEL=PATH[,KEY=VALUE...]")
-    path, *settings = rest.split(",")
-    env = {}
-    for s in settings:
-        k, sep, v = s.partition("=")
-        if not sep:
-            raise argparse.ArgumentTypeError(f"{s}: expected KEY=VALUE")
-        env[k] = v
-    return label, path, env
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from builds import parse_build  # noqa: E402  (the same LABEL=PATH[,KEY=VALUE...] syntax)
 
 
 def medians(home):
