@@ -47,10 +47,11 @@ fn make_rays(path: &str, class: &str) -> Rays {
 macro_rules! tracer {
     ($k:ident, $path:expr, $rays:expr, $class:expr, $api:expr, $level:expr) => {{
         use $k::{Coherence, HitPacket, HitStream, Isa, PACKET_WIDTH, Query, RayStream};
-        // The copy's kernel level for this run: the named one, else the copy's own choice.
+        // The copy's kernel level for this run: the named one, else the copy's own choice
+        // (`STRAHL_ISA` included), read before any run has set it.
         let isa = match $level {
             Some(name) => Isa::from_name(name).unwrap_or_else(|| panic!("unknown level {name}")),
-            None => Isa::best(),
+            None => $k::isa(),
         };
         let file = $k::SceneFile::read($path).unwrap();
         let scene = file.build(&Default::default()).unwrap().flatten(&Default::default()).unwrap();
