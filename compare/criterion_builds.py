@@ -44,7 +44,7 @@ def medians(home):
 def run(build, args, home):
     label, path, env = build
     groups = {"build": ("^build/", {"RAYON_NUM_THREADS": "1"}), "rays": ("^rays/", {})}
-    for flt, threads in (groups[g] for g in args.only.split(",")):
+    for flt, threads in (groups[g] for g in (["build", "rays"] if args.only == "all" else [args.only])):
         cmd = [path, "--bench", "--warm-up-time", str(args.warm_up), "--measurement-time", str(args.measurement),
                flt + (args.filter or "")]
         res = subprocess.run(cmd, env={**os.environ, **env, **threads, "CRITERION_HOME": home},
@@ -63,7 +63,7 @@ def main():
     p.add_argument("--warm-up", type=float, default=1.0, help="criterion warm-up seconds")
     p.add_argument("--measurement", type=float, default=3.0, help="criterion measurement seconds")
     p.add_argument("--filter", default="", help="a regex appended after ^build/ and ^rays/")
-    p.add_argument("--only", default="build,rays", choices=["build,rays", "build", "rays"],
+    p.add_argument("--only", default="all", choices=["all", "build", "rays"],
                    help="which bench groups to run")
     p.add_argument("--out", help="JSON report")
     p.add_argument("builds", nargs="+", type=parse_build)
