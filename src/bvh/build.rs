@@ -8,7 +8,7 @@
 //! largest surface area until it has `WIDTH` (8) children; then recurse, in parallel with rayon
 //! above [`BuildConfig::parallel_threshold`] primitives.
 
-use glam::{UVec4, Vec3A, Vec4};
+use glam::{BVec3A, UVec4, Vec3A, Vec4};
 use rayon::prelude::*;
 
 use super::node::{EMPTY, MAX_LEAF_BLOCKS, Node, WIDTH, is_leaf, leaf_blocks, leaf_ref};
@@ -429,9 +429,20 @@ fn fold(n: usize, to: (&mut BinBoxes, &mut BinCounts), from: (&BinBoxes, &BinCou
 
 /// The three bin indices of a reference's centroid; the clamp keeps the truncation in range
 /// (NaN-free input).
+///
+/// The fourth lanes are cleared first: a reference keeps its index there, which as a float is a
+/// denormal (below 2²³), and a multiply with a denormal operand costs a microcode assist on x86
+/// without denormals-are-zero, as a user's thread runs (PERFORMANCE.md, session 58). Clearing
+/// `offset`'s and `scale`'s lanes is loop-invariant and leaves the loop.
 #[inline(always)]
 fn bin_of(p: &PrimRef, offset: Vec3A, scale: Vec3A, last: Vec3A) -> [i32; 4] {
-    trunc4(((p.center2() - offset) * scale).clamp(Vec3A::ZERO, last).extend(0.0).to_array())
+    let xyz = BVec3A::new(true, true, true);
+    let (c, offset, scale) = (
+        Vec3A::select(xyz, p.center2(), Vec3A::ZERO),
+        Vec3A::select(xyz, offset, Vec3A::ZERO),
+        Vec3A::select(xyz, scale, Vec3A::ZERO),
+    );
+    trunc4(((c - offset) * scale).clamp(Vec3A::ZERO, last).extend(0.0).to_array())
 }
 
 /// A bin index from [`bin_of`] (in `0..bins`), masked into `0..MAX_BINS` so that indexing needs

@@ -440,10 +440,10 @@ impl SpatialBins {
     /// Bins `prims` into slabs of width `w` from `lo` (per axis; axes of zero width skipped).
     fn add(&mut self, prims: &[PrimRef], lo: Vec3A, w: Vec3A, corners: &Corners<'_>) {
         // All three axes' bins at once: one vector division and truncation per corner instead of
-        // three scalar ones, lane by lane the same numbers. No lane may divide by zero or touch a
-        // denormal, each of which cost this loop 5–10% on Zen 5 (PERFORMANCE.md): a zero-width
-        // axis divides by 1 (and is skipped), and the fourth lanes, where a reference keeps its
-        // index (as a float, a denormal), are cleared (`andps`).
+        // three scalar ones, lane by lane the same numbers. The fourth lanes, where a reference
+        // keeps its index (as a float, a denormal), are cleared (`andps`): a division by or of a
+        // denormal costs a microcode assist (PERFORMANCE.md, session 58). A zero-width axis
+        // divides by 1, and is skipped.
         const _: () = assert!(SPATIAL_BINS.is_power_of_two(), "a mask keeps the index in range");
         let last = Vec3A::splat((SPATIAL_BINS - 1) as f32);
         let xyz = BVec3A::new(true, true, true);
