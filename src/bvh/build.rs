@@ -436,13 +436,16 @@ fn fold(n: usize, to: (&mut BinBoxes, &mut BinCounts), from: (&BinBoxes, &BinCou
 /// `offset`'s and `scale`'s lanes is loop-invariant and leaves the loop.
 #[inline(always)]
 fn bin_of(p: &PrimRef, offset: Vec3A, scale: Vec3A, last: Vec3A) -> [i32; 4] {
-    let xyz = BVec3A::new(true, true, true);
-    let (c, offset, scale) = (
-        Vec3A::select(xyz, p.center2(), Vec3A::ZERO),
-        Vec3A::select(xyz, offset, Vec3A::ZERO),
-        Vec3A::select(xyz, scale, Vec3A::ZERO),
-    );
-    trunc4(((c - offset) * scale).clamp(Vec3A::ZERO, last).extend(0.0).to_array())
+    let c = xyz0(p.center2()) - xyz0(offset);
+    trunc4((c * xyz0(scale)).clamp(Vec3A::ZERO, last).extend(0.0).to_array())
+}
+
+/// `v` with its fourth lane zero (one `andps`), for arithmetic on a [`PrimRef`]'s box or anything
+/// grown from it: that lane holds a reference's index, a denormal as a float, and a multiply or
+/// divide with a denormal operand costs a microcode assist (see [`bin_of`]).
+#[inline(always)]
+pub(super) fn xyz0(v: Vec3A) -> Vec3A {
+    Vec3A::select(BVec3A::new(true, true, true), v, Vec3A::ZERO)
 }
 
 /// A bin index from [`bin_of`] (in `0..bins`), masked into `0..MAX_BINS` so that indexing needs

@@ -21,7 +21,7 @@ use rayon::prelude::*;
 
 use super::build::{
     Aabb, BinRule, BuildConfig, Built, Chunk, MEDIAN_DEPTH, PrimRef, SMALL_BUILD, Settings, Split, SubtreeCost, blocks,
-    find_split, partition,
+    find_split, partition, xyz0,
 };
 use super::node::Node;
 use super::node::WIDTH;
@@ -446,12 +446,8 @@ impl SpatialBins {
         // divides by 1, and is skipped.
         const _: () = assert!(SPATIAL_BINS.is_power_of_two(), "a mask keeps the index in range");
         let last = Vec3A::splat((SPATIAL_BINS - 1) as f32);
-        let xyz = BVec3A::new(true, true, true);
-        let (lo3, w3) = (Vec3A::select(xyz, lo, Vec3A::ZERO), Vec3A::select(xyz & w.cmpgt(Vec3A::ZERO), w, Vec3A::ONE));
-        let bins = |x: Vec3A| {
-            let x = Vec3A::select(xyz, x, Vec3A::ZERO);
-            trunc4(((x - lo3) / w3).clamp(Vec3A::ZERO, last).extend(0.0).to_array())
-        };
+        let (lo3, w3) = (xyz0(lo), Vec3A::select(BVec3A::new(true, true, true) & w.cmpgt(Vec3A::ZERO), w, Vec3A::ONE));
+        let bins = |x: Vec3A| trunc4(((xyz0(x) - lo3) / w3).clamp(Vec3A::ZERO, last).extend(0.0).to_array());
         for p in prims {
             let pb = p.bounds();
             let (lo_bins, hi_bins) = (bins(pb.lo), bins(pb.hi));
