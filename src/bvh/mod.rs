@@ -243,12 +243,12 @@ impl Bvh {
                     }
                 }
             }
-            let mut tris = [(0u32, 0u32, [Vec3::ZERO; 3]); BLOCK];
-            for (slot, p) in tris.iter_mut().zip(&prims[start..start + n]) {
+            let mut block = TriBlock::EMPTY;
+            for (lane, p) in prims[start..start + n].iter().enumerate() {
                 let (g, local) = locate(p.id() as usize);
-                *slot = (g as u32, local as u32, meshes[g].triangle(local));
+                block.set_lane(cfg.triangle_test, lane, g as u32, local as u32, meshes[g].triangle(local));
             }
-            TriBlock::new(cfg.triangle_test, &tris[..n])
+            block
         };
         let mut blocks: Vec<TriBlock> = crate::sys::huge_vec(sources.len());
         if parallel {

@@ -70,27 +70,40 @@ pub(crate) const BADOUEL_MAX_GEOMETRIES: usize = 1 << (32 - AUX_BITS);
 impl TriBlock {
     /// Packs up to [`BLOCK`] triangles `(geom_id, prim_id, corners)` for `test`.
     pub fn new(test: TriangleTest, tris: &[(u32, u32, [Vec3; 3])]) -> Self {
-        let mut b = TriBlock { rows: [[f32::NAN; BLOCK]; 9], geom: [u32::MAX; BLOCK], prim: [u32::MAX; BLOCK] };
-        for (lane, &(g, p, [a, bb, c])) in tris.iter().take(BLOCK).enumerate() {
-            b.geom[lane] = g;
-            let rows: [f32; 9] = match test {
-                TriangleTest::MollerTrumbore => {
-                    let (e1, e2) = (a - bb, c - a);
-                    [a.x, a.y, a.z, e1.x, e1.y, e1.z, e2.x, e2.y, e2.z]
-                }
-                TriangleTest::Watertight => [a.x, a.y, a.z, bb.x, bb.y, bb.z, c.x, c.y, c.z],
-                TriangleTest::Badouel => {
-                    let (rows, aux) = super::badouel::precompute(a, bb, c);
-                    b.geom[lane] = (g & (u32::MAX >> AUX_BITS)) | ((aux as u32) << (32 - AUX_BITS));
-                    rows
-                }
-            };
-            for (r, v) in b.rows.iter_mut().zip(rows) {
-                r[lane] = v;
-            }
-            b.prim[lane] = p;
+        let mut b = TriBlock::EMPTY;
+        for (lane, &(g, p, corners)) in tris.iter().take(BLOCK).enumerate() {
+            b.set_lane(test, lane, g, p, corners);
         }
         b
+    }
+
+    /// A block with no triangle: every lane's rows NaN, its ids `u32::MAX`.
+    pub const EMPTY: TriBlock =
+        TriBlock { rows: [[f32::NAN; BLOCK]; 9], geom: [u32::MAX; BLOCK], prim: [u32::MAX; BLOCK] };
+
+    /// Puts triangle `(g, p, [a, b, c])` into lane `lane` (below [`BLOCK`]) for `test`, in place.
+    /// The builder's leaf blocks are filled this way: gathering a block's triangles into an
+    /// array first and packing them after copied each corner twice through the stack, which in
+    /// a build without AVX went through integer registers (PERFORMANCE.md).
+    #[inline(always)]
+    pub fn set_lane(&mut self, test: TriangleTest, lane: usize, g: u32, p: u32, [a, bb, c]: [Vec3; 3]) {
+        self.geom[lane] = g;
+        let rows: [f32; 9] = match test {
+            TriangleTest::MollerTrumbore => {
+                let (e1, e2) = (a - bb, c - a);
+                [a.x, a.y, a.z, e1.x, e1.y, e1.z, e2.x, e2.y, e2.z]
+            }
+            TriangleTest::Watertight => [a.x, a.y, a.z, bb.x, bb.y, bb.z, c.x, c.y, c.z],
+            TriangleTest::Badouel => {
+                let (rows, aux) = super::badouel::precompute(a, bb, c);
+                self.geom[lane] = (g & (u32::MAX >> AUX_BITS)) | ((aux as u32) << (32 - AUX_BITS));
+                rows
+            }
+        };
+        for (r, v) in self.rows.iter_mut().zip(rows) {
+            r[lane] = v;
+        }
+        self.prim[lane] = p;
     }
 
     /// Bit `l` set for each lane `l` that holds a triangle (the filled lanes come first).
