@@ -672,11 +672,10 @@ mod tests {
                     (enter[b0], exit[b1]) = (1, 1);
                 }
                 assert_eq!((bins.enter[axis], bins.exit[axis]), (enter, exit), "case {case}, axis {axis}");
-                if w[axis] <= 0.0 {
-                    // want stays empty
-                } else if b0 == b1 {
+                // A flat axis (no width) bins nothing: `want` stays empty.
+                if w[axis] > 0.0 && b0 == b1 {
                     want[b0] = pb;
-                } else {
+                } else if w[axis] > 0.0 {
                     let mut rest = Some(pb);
                     for b in b0..b1 {
                         let Some(cur) = rest else { break };
