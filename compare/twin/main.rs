@@ -10,7 +10,9 @@
 //! diagonal) and API `stream`, `packet` or `single`; a build named `nat:avx512` (any level name
 //! after a colon) runs that copy at that kernel level. The rays are made once, by `nat`, and every
 //! build traces the same ones; the builds' answers are compared before timing. Set up by
-//! `run.sh`.
+//! `run.sh`. A scene file path with `@inst` after it (`data/forest.toml@inst`) is traced as the
+//! two-level scene the file builds, instances walked by ray transformation; without, as one flat
+//! scene of it (spheres and solids stay analytic either way).
 use std::time::Instant;
 
 type Run = Box<dyn FnMut() -> f64>;
@@ -23,15 +25,25 @@ const WIDTH: u32 = 1024;
 
 /// The class's rays, made by the `nat` copy the way the harness makes them.
 fn make_rays(path: &str, class: &str) -> Rays {
-    use strahl_nat::{Coherence, HitStream, Query, raygen};
+    let (path, two_level) = scene_path(path);
     let file = strahl_nat::SceneFile::read(path).unwrap();
-    let scene = file.build(&Default::default()).unwrap().flatten(&Default::default()).unwrap();
+    let built = file.build(&Default::default()).unwrap();
+    let diag = built.bounds().map(|(lo, hi)| (hi - lo).length()).unwrap_or(1.0);
+    if two_level {
+        rays_of(&built, &file, diag, class)
+    } else {
+        rays_of(&built.flatten(&Default::default()).unwrap(), &file, diag, class)
+    }
+}
+
+/// [`make_rays`] on one form of the scene.
+fn rays_of<Q: strahl_nat::Query>(scene: &Q, file: &strahl_nat::SceneFile, diag: f32, class: &str) -> Rays {
+    use strahl_nat::{Coherence, HitStream, raygen};
     let camera = file.camera.as_ref().expect("the scene file needs a camera").camera();
     let light = file.lights.first().expect("the scene file needs a light").position;
     let (primary, _) = raygen::primary(&camera, WIDTH, WIDTH);
     let mut hits = HitStream::default();
     scene.intersect_stream(&primary, &mut hits, Coherence::Coherent);
-    let diag = scene.bounds().map(|(lo, hi)| (hi - lo).length()).unwrap_or(1.0);
     let offset = raygen::Offset::Epsilon(1e-4 * diag);
     let r = match class {
         "primary" => primary,
@@ -42,7 +54,7 @@ fn make_rays(path: &str, class: &str) -> Rays {
     [r.ox, r.oy, r.oz, r.dx, r.dy, r.dz, r.tnear, r.tfar]
 }
 
-/// Traces `rays` through one copy's flattened scene with one API: a closure that returns the
+/// Traces `rays` through one copy's scene (flattened, or two-level with `@inst`) with one API: a closure that returns the
 /// time in ms and the answers (t and primitive of closest hits; for occlusion see [`occluded`]).
 macro_rules! tracer {
     ($k:ident, $path:expr, $rays:expr, $class:expr, $api:expr, $level:expr) => {{
@@ -53,13 +65,15 @@ macro_rules! tracer {
             Some(name) => Isa::from_name(name).unwrap_or_else(|| panic!("unknown level {name}")),
             None => $k::isa(),
         };
-        let file = $k::SceneFile::read($path).unwrap();
-        let scene = file.build(&Default::default()).unwrap().flatten(&Default::default()).unwrap();
+        let (path, two_level) = scene_path($path);
+        let built = $k::SceneFile::read(path).unwrap().build(&Default::default()).unwrap();
         let [ox, oy, oz, dx, dy, dz, tnear, tfar] = $rays.clone();
         let rays = RayStream { ox, oy, oz, dx, dy, dz, tnear, tfar };
-        let occlusion = $class == "shadow";
-        let coherence = if $class == "primary" { Coherence::Coherent } else { Coherence::Incoherent };
-        let api = $api.to_string();
+        // The two-level scene as built, or one flat scene of it; one closure body for either.
+        fn trace<Q: Query + 'static>(scene: Q, rays: RayStream, isa: Isa, class: &str, api: &str) -> Trace {
+        let occlusion = class == "shadow";
+        let coherence = if class == "primary" { Coherence::Coherent } else { Coherence::Incoherent };
+        let api = api.to_string();
         let n = rays.len();
         let mut hits = HitStream::default();
         let mut occ = Vec::new();
@@ -109,6 +123,12 @@ macro_rules! tracer {
                 _ => (ms, out.clone()),
             }
         }) as Trace
+        }
+        if two_level {
+            trace(built, rays, isa, $class, $api)
+        } else {
+            trace(built.flatten(&Default::default()).unwrap(), rays, isa, $class, $api)
+        }
     }};
 }
 
@@ -117,6 +137,12 @@ type Trace = Box<dyn FnMut() -> (f64, Vec<(f32, u32)>)>;
 /// An occlusion answer in the closest-hit form: 0 where occluded (finite, a hit), +inf where not.
 fn occluded(o: bool) -> f32 {
     if o { 0.0 } else { f32::INFINITY }
+}
+
+/// A scene argument: a scene file, traced as one flat scene, or with `@inst` after it as the
+/// two-level scene the file builds (instances walked by ray transformation).
+fn scene_path(arg: &str) -> (&str, bool) {
+    arg.strip_suffix("@inst").map_or((arg, false), |p| (p, true))
 }
 
 /// A build's tracer; `name` may carry a kernel level after a colon (`nat:avx512`), set before
@@ -134,7 +160,7 @@ fn make_trace(name: &str, path: &str, rays: &Rays, class: &str, api: &str) -> Tr
 
 macro_rules! runner {
     ($k:ident, $path:expr, $high:expr) => {{
-        let m = $k::SceneFile::read($path)
+        let m = $k::SceneFile::read(scene_path($path).0)
             .unwrap()
             .build(&Default::default())
             .unwrap()
