@@ -256,13 +256,15 @@ impl Query for Scene {
         if !self.has_shapes() || tri == rays.active & crate::simd::low_bits(PACKET_WIDTH) {
             return tri;
         }
-        let rest = RayPacket { active: rays.active & !tri, ..*rays };
-        let sph = tri | self.shapes.occluded_packet(&rest);
+        // The lanes still open; the packet itself while none is closed (no 512-byte copy).
+        fn open<'a>(rays: &'a RayPacket, closed: u32, rest: &'a mut Option<RayPacket>) -> &'a RayPacket {
+            if closed == 0 { rays } else { rest.insert(RayPacket { active: rays.active & !closed, ..*rays }) }
+        }
+        let sph = tri | self.shapes.occluded_packet(open(rays, tri, &mut None));
         if self.solid_tree.is_empty() || sph == rays.active & crate::simd::low_bits(PACKET_WIDTH) {
             return sph;
         }
-        let rest = RayPacket { active: rays.active & !sph, ..*rays };
-        sph | self.solid_tree.trace_packet::<true>(&rest, &mut HitPacket::default())
+        sph | self.solid_tree.trace_packet::<true>(open(rays, sph, &mut None), &mut HitPacket::default())
     }
 
     /// Trees of more than 32 MiB. Below that, nodes come from the cache, and packets of 16 (with

@@ -6,7 +6,7 @@
 //! of the per-pair time ratio B/A, by wall clock (`app SCENE PAIRS A B high`: with
 //! `BuildConfig::high`, spatial splits). `app SCENE PAIRS A B CLASS API` times ray
 //! queries instead: CLASS is `primary`, `shadow` or `diffuse` (the harness's classes, from the
-//! scene file's camera and first light, 1024² primary rays, seed 1, epsilon 1e-4 × the scene's
+//! scene file's camera and first light, 1024² primary rays (`TWIN_WIDTH`), seed 1, epsilon 1e-4 × the scene's
 //! diagonal) and API `stream`, `packet` or `single`; a build named `nat:avx512` (any level name
 //! after a colon) runs that copy at that kernel level. The rays are made once, by `nat`, and every
 //! build traces the same ones; the builds' answers are compared before timing. Set up by
@@ -21,7 +21,11 @@ type Run = Box<dyn FnMut() -> f64>;
 /// library can make its own `RayStream` of the same rays.
 type Rays = [Vec<f32>; 8];
 
-const WIDTH: u32 = 1024;
+/// The image's width and height in primary rays: 1024, or `TWIN_WIDTH` (256 is the criterion
+/// benches' size, whose rays stay in the cache).
+fn width() -> u32 {
+    std::env::var("TWIN_WIDTH").ok().and_then(|s| s.parse().ok()).unwrap_or(1024)
+}
 
 /// The class's rays, made by the `nat` copy the way the harness makes them.
 fn make_rays(path: &str, class: &str) -> Rays {
@@ -41,7 +45,7 @@ fn rays_of<Q: strahl_nat::Query>(scene: &Q, file: &strahl_nat::SceneFile, diag: 
     use strahl_nat::{Coherence, HitStream, raygen};
     let camera = file.camera.as_ref().expect("the scene file needs a camera").camera();
     let light = file.lights.first().expect("the scene file needs a light").position;
-    let (primary, _) = raygen::primary(&camera, WIDTH, WIDTH);
+    let (primary, _) = raygen::primary(&camera, width(), width());
     let mut hits = HitStream::default();
     scene.intersect_stream(&primary, &mut hits, Coherence::Coherent);
     let offset = raygen::Offset::Epsilon(1e-4 * diag);

@@ -55,6 +55,13 @@ impl Bvh {
     /// The hits go to `hits` (without instance ids; an out-parameter: returned by value, the
     /// results were copied twice per group).
     pub(crate) fn trace_group(&self, ps: &[RayPacket; GROUP], hits: &mut [HitPacket; GROUP]) {
+        if self.root == EMPTY {
+            // No triangles: every lane misses.
+            for h in hits.iter_mut() {
+                PacketHits::new(h);
+            }
+            return;
+        }
         with_stack(|stack| {
             dispatch!(self.test, self.box_test, |K, C| {
                 let mut out = hits.each_mut().map(PacketHits::new);

@@ -783,6 +783,11 @@ impl Bvh {
     /// The closest hits go to `hit` (without instance ids); returns the lanes that hit (are
     /// occluded).
     pub fn trace_packet<const ANY: bool>(&self, p: &RayPacket, hit: &mut HitPacket) -> u32 {
+        if self.root == EMPTY {
+            // No triangles (a scene of spheres or solids): every lane misses, without the walk's
+            // set-up.
+            return PacketHits::new(hit).mask;
+        }
         with_stack(|stack| {
             dispatch!(self.test, self.box_test, |K, C| with_level!(|L| self.trace_packet_with::<ANY, K, C, L>(
                 p,
@@ -795,6 +800,9 @@ impl Bvh {
     /// The occluded lanes of a packet: [`trace_packet`](Self::trace_packet) with `ANY`, its
     /// record of hits a scratch one made at the kernels' level.
     pub fn occluded_packet(&self, p: &RayPacket) -> u32 {
+        if self.root == EMPTY {
+            return 0;
+        }
         with_stack(|stack| {
             dispatch!(self.test, self.box_test, |K, C| with_level!(
                 |L| self.trace_packet_with::<true, K, C, L>(p, None, stack)
@@ -1259,7 +1267,9 @@ impl<L: Level> PacketBoxes<L> {
 /// The closest hits of packet `p` nearer than those already in `hits` (an earlier walk's over
 /// another tree of the scene), found by `trace(q, out)` on the packet with each lane's `tfar`
 /// lowered to its hit so far, and written over `hits`; returns the lanes `trace` hit. The
-/// sphere and solid trees answer a scene's packets after the triangles with it.
+/// sphere and solid trees answer a scene's packets after the triangles with it, inside their
+/// level's function (hence inlined there).
+#[inline(always)]
 pub(crate) fn closer_packet_by(
     p: &RayPacket,
     hits: &mut HitPacket,

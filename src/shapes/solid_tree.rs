@@ -328,7 +328,37 @@ impl SolidBvh {
         if self.is_empty() {
             return 0;
         }
-        closer_packet_by(p, hits, |q, mine| self.trace_packet::<false>(q, mine))
+        with_stack(|stack| {
+            with_level!(|L| match self.box_test {
+                BoxTest::Conservative => self.closer_packet_with::<true, L>(p, hits, stack),
+                BoxTest::Fast => self.closer_packet_with::<false, L>(p, hits, stack),
+            })
+        })
+    }
+
+    /// [`closer_packet`](Self::closer_packet) at a level (see the sphere tree's).
+    #[inline(never)]
+    fn closer_packet_with<const CONS: bool, L: Level>(
+        &self,
+        p: &RayPacket,
+        hits: &mut HitPacket,
+        stack: &mut Stack,
+    ) -> u32 {
+        L::call(
+            #[inline(always)]
+            || {
+                closer_packet_by(
+                    p,
+                    hits,
+                    #[inline(always)]
+                    |q, mine| {
+                        let mut out = PacketHits::new(mine);
+                        self.trace_packet_in::<false, CONS, L>(q, &mut out, stack);
+                        out.mask
+                    },
+                )
+            },
+        )
     }
 
     /// Calls `f` for every surface crossing of `ray` in `(tnear, tfar]` with a solid, in no

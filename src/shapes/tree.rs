@@ -248,8 +248,10 @@ impl SphereBvh {
         h.map(|h| self.hit_record(&h, ray.origin, ray.dir))
     }
 
-    /// [`trace_packet`](Self::trace_packet) on `stack` above its entries, the box test chosen by
-    /// the caller, at the caller's level: an instance's object walk.
+    /// Closest hits (`ANY = false`) or occlusion (`ANY = true`) of the active lanes of a packet,
+    /// into `hit` (every lane rewritten: misses where nothing is hit), on `stack` above its
+    /// entries, the box test chosen by the caller, at the caller's level: an instance's object
+    /// walk. Returns the lanes that hit; invalid rays miss.
     pub(crate) fn trace_packet_on<const ANY: bool, const CONS: bool, L: Level>(
         &self,
         p: &RayPacket,
@@ -303,21 +305,6 @@ impl SphereBvh {
             },
         );
         best
-    }
-
-    /// Closest hits (`ANY = false`) or occlusion (`ANY = true`) of the active lanes of a packet,
-    /// into `hit` (every lane rewritten: misses where nothing is hit); returns the lanes that
-    /// hit. Invalid rays miss.
-    pub fn trace_packet<const ANY: bool>(&self, p: &RayPacket, hit: &mut HitPacket) -> u32 {
-        let mut out = PacketHits::new(hit);
-        if !self.is_empty() {
-            with_stack(|stack| {
-                dispatch_spheres!(self.test, self.box_test, |K, C| with_level!(
-                    |L| self.trace_packet_with::<ANY, K, C, L>(p, &mut out, stack)
-                ))
-            });
-        }
-        out.mask
     }
 
     /// The occluded lanes of a packet, the hits recorded in a scratch record made at the
@@ -465,7 +452,38 @@ impl SphereBvh {
         if self.is_empty() {
             return 0;
         }
-        closer_packet_by(p, hits, |q, mine| self.trace_packet::<false>(q, mine))
+        with_stack(|stack| {
+            dispatch_spheres!(self.test, self.box_test, |K, C| with_level!(
+                |L| self.closer_packet_with::<K, C, L>(p, hits, stack)
+            ))
+        })
+    }
+
+    /// [`closer_packet`](Self::closer_packet) at a level: the packet's `tfar` lowered to the
+    /// hits so far and the merge of the walk's hits into them are compiled with the walk (in a
+    /// dependency build they ran at SSE2 outside it, copies of 512-byte packets included).
+    #[inline(never)]
+    fn closer_packet_with<K: SphereKernel, const CONS: bool, L: Level>(
+        &self,
+        p: &RayPacket,
+        hits: &mut HitPacket,
+        stack: &mut Stack,
+    ) -> u32 {
+        L::call(
+            #[inline(always)]
+            || {
+                closer_packet_by(
+                    p,
+                    hits,
+                    #[inline(always)]
+                    |q, mine| {
+                        let mut out = PacketHits::new(mine);
+                        self.trace_packet_in::<false, K, CONS, L>(q, &mut out, stack);
+                        out.mask
+                    },
+                )
+            },
+        )
     }
 
     /// Calls `f` for every surface crossing of `ray` in `(tnear, tfar]` with a sphere (both roots
