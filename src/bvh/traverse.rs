@@ -1265,29 +1265,37 @@ impl<L: Level> PacketBoxes<L> {
 }
 
 /// The closest hits of packet `p` nearer than those already in `hits` (an earlier walk's over
-/// another tree of the scene), found by `trace(q, out)` on the packet with each lane's `tfar`
-/// lowered to its hit so far, and written over `hits`; returns the lanes `trace` hit. The
-/// sphere and solid trees answer a scene's packets after the triangles with it, inside their
-/// level's function (hence inlined there).
+/// another tree of the scene), found by `walk(q, out)` on the packet with each lane's `tfar`
+/// lowered to its hit so far, and written over `hits`; returns the lanes `walk` hit. The sphere
+/// and solid trees answer a scene's packets after the triangles with it. All of it runs inside
+/// the level's function (`L::call`): outside it, in a dependency build, the packet's copy and
+/// the merge ran at SSE2.
 #[inline(always)]
-pub(crate) fn closer_packet_by(
+pub(crate) fn closer_packet_by<L: Level>(
     p: &RayPacket,
     hits: &mut HitPacket,
-    trace: impl FnOnce(&RayPacket, &mut HitPacket) -> u32,
+    walk: impl FnOnce(&RayPacket, &mut PacketHits<'_>),
 ) -> u32 {
-    let mut q = *p;
-    for l in 0..PACKET_WIDTH {
-        q.tfar[l] = q.tfar[l].min(hits.t[l]);
-    }
-    let mut mine = HitPacket::default();
-    let mask = trace(&q, &mut mine);
-    let mut bits = mask;
-    while bits != 0 {
-        let l = bits.trailing_zeros() as usize;
-        bits &= bits - 1;
-        hits.set(l, mine.get(l));
-    }
-    mask
+    L::call(
+        #[inline(always)]
+        || {
+            let mut q = *p;
+            for l in 0..PACKET_WIDTH {
+                q.tfar[l] = q.tfar[l].min(hits.t[l]);
+            }
+            let mut mine = HitPacket::default();
+            let mut out = PacketHits::new(&mut mine);
+            walk(&q, &mut out);
+            let mask = out.mask;
+            let mut bits = mask;
+            while bits != 0 {
+                let l = bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                hits.set(l, mine.get(l));
+            }
+            mask
+        },
+    )
 }
 
 /// Walks the `lanes` of packet `p` one ray at a time: `walk(ray)` with the lane's current `tfar`

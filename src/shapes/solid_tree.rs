@@ -344,20 +344,11 @@ impl SolidBvh {
         hits: &mut HitPacket,
         stack: &mut Stack,
     ) -> u32 {
-        L::call(
+        closer_packet_by::<L>(
+            p,
+            hits,
             #[inline(always)]
-            || {
-                closer_packet_by(
-                    p,
-                    hits,
-                    #[inline(always)]
-                    |q, mine| {
-                        let mut out = PacketHits::new(mine);
-                        self.trace_packet_in::<false, CONS, L>(q, &mut out, stack);
-                        out.mask
-                    },
-                )
-            },
+            |q, out| self.trace_packet_in::<false, CONS, L>(q, out, stack),
         )
     }
 

@@ -469,20 +469,11 @@ impl SphereBvh {
         hits: &mut HitPacket,
         stack: &mut Stack,
     ) -> u32 {
-        L::call(
+        closer_packet_by::<L>(
+            p,
+            hits,
             #[inline(always)]
-            || {
-                closer_packet_by(
-                    p,
-                    hits,
-                    #[inline(always)]
-                    |q, mine| {
-                        let mut out = PacketHits::new(mine);
-                        self.trace_packet_in::<false, K, CONS, L>(q, &mut out, stack);
-                        out.mask
-                    },
-                )
-            },
+            |q, out| self.trace_packet_in::<false, K, CONS, L>(q, out, stack),
         )
     }
 
