@@ -6,8 +6,8 @@
 //! of the per-pair time ratio B/A, by wall clock (`app SCENE PAIRS A B high`: with
 //! `BuildConfig::high`, spatial splits). `app SCENE PAIRS A B CLASS API` times ray
 //! queries instead: CLASS is `primary`, `shadow` or `diffuse` (the harness's classes, from the
-//! scene file's camera and first light, 1024² primary rays (`TWIN_WIDTH`), seed 1, epsilon 1e-4 × the scene's
-//! diagonal) and API `stream`, `packet` or `single`; a build named `nat:avx512` (any level name
+//! scene file's camera and first light, 1024² primary rays or `TWIN_WIDTH`², seed 1, epsilon
+//! 1e-4 × the scene's diagonal) and API `stream`, `packet` or `single`; a build named `nat:avx512` (any level name
 //! after a colon) runs that copy at that kernel level. The rays are made once, by `nat`, and every
 //! build traces the same ones; the builds' answers are compared before timing. Set up by
 //! `run.sh`. A scene file path with `@inst` after it (`data/forest.toml@inst`) is traced as the
@@ -58,8 +58,9 @@ fn rays_of<Q: strahl_nat::Query>(scene: &Q, file: &strahl_nat::SceneFile, diag: 
     [r.ox, r.oy, r.oz, r.dx, r.dy, r.dz, r.tnear, r.tfar]
 }
 
-/// Traces `rays` through one copy's scene (flattened, or two-level with `@inst`) with one API: a closure that returns the
-/// time in ms and the answers (t and primitive of closest hits; for occlusion see [`occluded`]).
+/// Traces `rays` through one copy's scene (flattened, or two-level with `@inst`) with one API: a
+/// closure that returns the time in ms and the answers (t and primitive of closest hits; for
+/// occlusion see [`occluded`]).
 macro_rules! tracer {
     ($k:ident, $path:expr, $rays:expr, $class:expr, $api:expr, $level:expr) => {{
         use $k::{Coherence, HitPacket, HitStream, Isa, PACKET_WIDTH, Query, RayStream};
@@ -75,58 +76,59 @@ macro_rules! tracer {
         let rays = RayStream { ox, oy, oz, dx, dy, dz, tnear, tfar };
         // The two-level scene as built, or one flat scene of it; one closure body for either.
         fn trace<Q: Query + 'static>(scene: Q, rays: RayStream, isa: Isa, class: &str, api: &str) -> Trace {
-        let occlusion = class == "shadow";
-        let coherence = if class == "primary" { Coherence::Coherent } else { Coherence::Incoherent };
-        let api = api.to_string();
-        let n = rays.len();
-        let mut hits = HitStream::default();
-        let mut occ = Vec::new();
-        let mut out = vec![(0f32, 0u32); n];
-        Box::new(move || {
-            $k::set_isa(isa).unwrap();
-            let t = Instant::now();
-            match (api.as_str(), occlusion) {
-                ("stream", true) => scene.occluded_stream(&rays, &mut occ, coherence),
-                ("stream", false) => scene.intersect_stream(&rays, &mut hits, coherence),
-                ("packet", _) => {
-                    let mut hp = HitPacket::default();
-                    for k in (0..n).step_by(PACKET_WIDTH) {
-                        let m = (n - k).min(PACKET_WIDTH);
-                        let p = rays.packet(k, m);
-                        if occlusion {
-                            let bits = scene.occluded_packet(&p);
-                            for l in 0..m {
-                                out[k + l] = (occluded(bits >> l & 1 != 0), 0);
-                            }
-                        } else {
-                            scene.intersect_packet(&p, &mut hp);
-                            for l in 0..m {
-                                out[k + l] = (hp.t[l], hp.prim_id[l]);
+            let occlusion = class == "shadow";
+            let coherence = if class == "primary" { Coherence::Coherent } else { Coherence::Incoherent };
+            let api = api.to_string();
+            let n = rays.len();
+            let mut hits = HitStream::default();
+            let mut occ = Vec::new();
+            let mut out = vec![(0f32, 0u32); n];
+            Box::new(move || {
+                $k::set_isa(isa).unwrap();
+                let t = Instant::now();
+                match (api.as_str(), occlusion) {
+                    ("stream", true) => scene.occluded_stream(&rays, &mut occ, coherence),
+                    ("stream", false) => scene.intersect_stream(&rays, &mut hits, coherence),
+                    ("packet", _) => {
+                        let mut hp = HitPacket::default();
+                        for k in (0..n).step_by(PACKET_WIDTH) {
+                            let m = (n - k).min(PACKET_WIDTH);
+                            let p = rays.packet(k, m);
+                            if occlusion {
+                                let bits = scene.occluded_packet(&p);
+                                for l in 0..m {
+                                    out[k + l] = (occluded(bits >> l & 1 != 0), 0);
+                                }
+                            } else {
+                                scene.intersect_packet(&p, &mut hp);
+                                for l in 0..m {
+                                    out[k + l] = (hp.t[l], hp.prim_id[l]);
+                                }
                             }
                         }
                     }
-                }
-                ("single", _) => {
-                    for (i, o) in out.iter_mut().enumerate() {
-                        let r = rays.get(i);
-                        *o = if occlusion {
-                            (occluded(scene.occluded(&r)), 0)
-                        } else {
-                            scene.intersect(&r).map_or((f32::INFINITY, u32::MAX), |h| (h.t, h.prim_id))
-                        };
+                    ("single", _) => {
+                        for (i, o) in out.iter_mut().enumerate() {
+                            let r = rays.get(i);
+                            *o = if occlusion {
+                                (occluded(scene.occluded(&r)), 0)
+                            } else {
+                                scene.intersect(&r).map_or((f32::INFINITY, u32::MAX), |h| (h.t, h.prim_id))
+                            };
+                        }
                     }
+                    _ => panic!("unknown api {api}"),
                 }
-                _ => panic!("unknown api {api}"),
-            }
-            let ms = t.elapsed().as_secs_f64() * 1e3;
-            match (api.as_str(), occlusion) {
-                ("stream", true) => (ms, occ.iter().map(|&b| (occluded(b), 0)).collect()),
-                ("stream", false) => {
-                    (ms, (0..n).map(|i| hits.get(i).map_or((f32::INFINITY, u32::MAX), |h| (h.t, h.prim_id))).collect())
+                let ms = t.elapsed().as_secs_f64() * 1e3;
+                match (api.as_str(), occlusion) {
+                    ("stream", true) => (ms, occ.iter().map(|&b| (occluded(b), 0)).collect()),
+                    ("stream", false) => {
+                        let hit = |i| hits.get(i).map_or((f32::INFINITY, u32::MAX), |h| (h.t, h.prim_id));
+                        (ms, (0..n).map(hit).collect())
+                    }
+                    _ => (ms, out.clone()),
                 }
-                _ => (ms, out.clone()),
-            }
-        }) as Trace
+            }) as Trace
         }
         if two_level {
             trace(built, rays, isa, $class, $api)
