@@ -1458,7 +1458,10 @@ pub(crate) fn walk_packet<const ANY: bool, const CONS: bool, L: Level>(
                         }
                     }
                     hit_child[n] = if is_leaf(c) { c } else { c | LANE_MODE };
-                    hit_dist[n] = tn.hmin();
+                    // An any-hit walk that keeps lane masks reads no entry's distance: a popped
+                    // entry's open lanes decide (its lanes entered before their `tfar`, which
+                    // only ever drops to `-inf`), so the 16-lane minimum is skipped.
+                    hit_dist[n] = if ANY && switch { 0.0 } else { tn.hmin() };
                     hit_lanes[n] = m;
                     hit_tn[n] = tn;
                     n += 1;
